@@ -88,7 +88,13 @@ pub fn chi2_test(observed: &[f64], expected: &[f64]) -> Chi2Outcome {
     let statistic: f64 = pooled.iter().map(|&(o, e)| (o - e) * (o - e) / e).sum();
     let dof = pooled.len().saturating_sub(1);
     let p_value = if dof == 0 { 1.0 } else { chi2_survival(statistic, dof as f64) };
-    Chi2Outcome { statistic, dof, p_value, bins: pooled.len(), expected_fraction: n_exp / n_obs.max(1.0) }
+    Chi2Outcome {
+        statistic,
+        dof,
+        p_value,
+        bins: pooled.len(),
+        expected_fraction: n_exp / n_obs.max(1.0),
+    }
 }
 
 /// A polar grid over the sphere about `axis`, graded towards the axis.

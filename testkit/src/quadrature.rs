@@ -53,7 +53,14 @@ impl GaussLegendre {
     }
 
     /// Integral of `f` over the rectangle [a0, a1] x [b0, b1].
-    pub fn integrate_2d(&self, a0: f64, a1: f64, b0: f64, b1: f64, f: impl Fn(f64, f64) -> f64) -> f64 {
+    pub fn integrate_2d(
+        &self,
+        a0: f64,
+        a1: f64,
+        b0: f64,
+        b1: f64,
+        f: impl Fn(f64, f64) -> f64,
+    ) -> f64 {
         self.integrate(a0, a1, |a| self.integrate(b0, b1, |b| f(a, b)))
     }
 }
@@ -75,6 +82,8 @@ mod tests {
         // A 5-point rule is exact up to degree 9.
         let v = gl.integrate(0.0, 2.0, |x| x.powi(9) - 3.0 * x.powi(4));
         assert!((v - (2f64.powi(10) / 10.0 - 3.0 * 2f64.powi(5) / 5.0)).abs() < 1e-10);
-        assert!((integrate_1d(&|x: f64| x.sin(), 0.0, std::f64::consts::PI, 4) - 2.0).abs() < 1e-12);
+        assert!(
+            (integrate_1d(&|x: f64| x.sin(), 0.0, std::f64::consts::PI, 4) - 2.0).abs() < 1e-12
+        );
     }
 }
