@@ -280,12 +280,6 @@ impl MeanEstimate {
         self.m2 += d * (x - self.mean);
     }
 
-    /// Builds an estimate from an iterator of samples.
-    pub fn from_iter(samples: impl IntoIterator<Item = f64>) -> Self {
-        let mut m = Self::default();
-        samples.into_iter().for_each(|x| m.push(x));
-        m
-    }
 
     /// Unbiased sample variance.
     pub fn variance(&self) -> f64 {
@@ -318,6 +312,14 @@ impl MeanEstimate {
             self.std_error(),
             self.n
         );
+    }
+}
+
+impl FromIterator<f64> for MeanEstimate {
+    fn from_iter<I: IntoIterator<Item = f64>>(samples: I) -> Self {
+        let mut m = Self::default();
+        samples.into_iter().for_each(|x| m.push(x));
+        m
     }
 }
 
@@ -408,7 +410,7 @@ mod tests {
     #[test]
     fn mean_estimate_z() {
         let mut rng = SplitMix(5);
-        let m = MeanEstimate::from_iter((0..100_000).map(|_| rng.next()));
+        let m: MeanEstimate = (0..100_000).map(|_| rng.next()).collect();
         m.assert_matches(0.5, 4.0, "uniform mean");
         assert!(m.z(0.51).abs() > 4.0);
         assert!((m.variance() - 1.0 / 12.0).abs() < 1e-3);
