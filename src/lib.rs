@@ -1,1 +1,34 @@
-//! zerovar
+//! zerovar: a volumetric path tracer built around zero-variance path guiding.
+//!
+//! The library holds everything the `zerovar` binary does: scene loading and validation
+//! (`scene`), geometry (`shapes`, `accel`), surfaces and phase functions (`bsdf`, `phase`),
+//! participating media (`media`) and the estimators that move through them (`tracking`),
+//! `lights`, the `camera`, the `integrators`, and the `render` session that drives them over
+//! tiles, accumulates a `film` and writes images (`output`).
+//!
+//! ```no_run
+//! use zerovar::render::{Budget, RenderOptions, render};
+//! let scene = zerovar::scene::load("scenes/fog-sphere.toml".as_ref(), &[]).unwrap();
+//! let options = RenderOptions { budget: Budget::Samples(16), seed: 0, threads: None };
+//! let result = render(&scene, &options, &|_, _| {}).unwrap();
+//! println!("mean pixel {:?}", result.film.average());
+//! ```
+
+pub mod accel;
+pub mod bsdf;
+pub mod camera;
+pub mod distribution;
+pub mod film;
+pub mod integrators;
+pub mod lights;
+pub mod math;
+pub mod media;
+pub mod output;
+pub mod phase;
+pub mod render;
+pub mod rng;
+pub mod scene;
+pub mod shapes;
+pub mod stats;
+pub mod tracking;
+pub mod transform;

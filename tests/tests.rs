@@ -1,1 +1,8 @@
-mod x {}
+//! Integration tests of the renderer, one binary with a module per concern (as ripgrep does).
+
+mod cli;
+mod common;
+mod furnace;
+mod render;
+mod single_scatter;
+mod transmittance;

@@ -280,7 +280,6 @@ impl MeanEstimate {
         self.m2 += d * (x - self.mean);
     }
 
-
     /// Unbiased sample variance.
     pub fn variance(&self) -> f64 {
         if self.n < 2 { 0.0 } else { self.m2 / (self.n - 1) as f64 }

@@ -1,0 +1,78 @@
+//! The film: per-pixel running sums in f64 (so millions of samples do not lose precision) of
+//! RGB and of squared luminance, giving the image and a per-pixel variance estimate.
+
+use crate::math::{Spectrum, luminance};
+
+/// Accumulated samples of one pixel.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct PixelSum {
+    /// Sum of RGB samples.
+    pub rgb: [f64; 3],
+    /// Sum of squared luminance.
+    pub lum_sq: f64,
+    /// Number of samples.
+    pub count: u32,
+}
+
+impl PixelSum {
+    /// Adds one sample.
+    #[inline]
+    pub fn add(&mut self, c: Spectrum) {
+        for (s, v) in self.rgb.iter_mut().zip(c.to_array()) {
+            *s += v as f64;
+        }
+        let l = luminance(c) as f64;
+        self.lum_sq += l * l;
+        self.count += 1;
+    }
+
+    /// Merges another sum into this one.
+    pub fn merge(&mut self, o: &PixelSum) {
+        for i in 0..3 {
+            self.rgb[i] += o.rgb[i];
+        }
+        self.lum_sq += o.lum_sq;
+        self.count += o.count;
+    }
+
+    /// The mean RGB.
+    pub fn mean(&self) -> [f32; 3] {
+        let n = self.count.max(1) as f64;
+        self.rgb.map(|s| (s / n) as f32)
+    }
+}
+
+/// A film of `width * height` pixels.
+#[derive(Clone, Debug)]
+pub struct Film {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Row-major pixel sums.
+    pub pixels: Vec<PixelSum>,
+}
+
+impl Film {
+    /// An empty film.
+    pub fn new(width: u32, height: u32) -> Self {
+        Self { width, height, pixels: vec![PixelSum::default(); (width * height) as usize] }
+    }
+
+    /// The image as row-major RGB means.
+    pub fn image(&self) -> Vec<[f32; 3]> {
+        self.pixels.iter().map(PixelSum::mean).collect()
+    }
+
+    /// Mean RGB over all pixels.
+    pub fn average(&self) -> [f64; 3] {
+        let mut acc = [0.0; 3];
+        for p in &self.pixels {
+            let m = p.mean();
+            for i in 0..3 {
+                acc[i] += m[i] as f64;
+            }
+        }
+        acc.map(|a| a / self.pixels.len().max(1) as f64)
+    }
+}

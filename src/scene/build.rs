@@ -1,0 +1,594 @@
+//! Compiling a parsed scene description into a `Scene`: every value is validated here, with
+//! an error naming the file, line and element, and the fix.
+
+use super::desc::*;
+use super::{RenderSettings, Scene, SceneError, Surface};
+use crate::accel::Bvh;
+use crate::bsdf::{Bsdf, Texture};
+use crate::camera::Camera;
+use crate::lights::{EnvMap, Light};
+use crate::math::{Frame, Spectrum};
+use crate::media::{AlbedoField, DensityField, Grid, Heterogeneous, Medium, MediumKind, VolGrid};
+use crate::phase::PhaseFunction;
+use crate::shapes::{Disk, Geometry, Mesh, Sphere};
+use crate::tracking::Tracker;
+use crate::transform::Transform;
+use glam::{Vec2, Vec3, Vec3A};
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+
+/// The file being built and the element being looked at, for error messages.
+struct Ctx<'a> {
+    path: &'a Path,
+    source: &'a str,
+    offset: usize,
+    place: String,
+}
+
+type Result<T> = std::result::Result<T, SceneError>;
+
+impl Ctx<'_> {
+    fn at(&mut self, offset: usize, place: String) {
+        self.offset = offset;
+        self.place = place;
+    }
+
+    fn err<T>(&self, message: impl Into<String>) -> Result<T> {
+        Err(SceneError::invalid(
+            self.path,
+            self.source,
+            Some(self.offset),
+            &self.place,
+            &message.into(),
+        ))
+    }
+
+    fn file(&self, name: &str) -> PathBuf {
+        self.path.parent().unwrap_or(Path::new(".")).join(name)
+    }
+
+    /// Rejects fields given for a kind that does not take them.
+    fn only(&self, kind: &str, fields: &[(&str, bool)]) -> Result<()> {
+        match fields.iter().find(|(_, present)| *present) {
+            Some((name, _)) => self.err(format!("`{name}` does not apply to {kind}; remove it")),
+            None => Ok(()),
+        }
+    }
+
+    fn finite(&self, what: &str, v: &[f32]) -> Result<()> {
+        if v.iter().all(|x| x.is_finite()) {
+            Ok(())
+        } else {
+            self.err(format!("{what} must be finite"))
+        }
+    }
+
+    fn colour(&self, what: &str, c: Rgb, max: Option<f32>) -> Result<Spectrum> {
+        let v = c.channels();
+        self.finite(what, &v)?;
+        if v.iter().any(|x| *x < 0.0) {
+            return self
+                .err(format!("{what} {v:?} has a negative channel; colours are non-negative"));
+        }
+        if let Some(m) = max.filter(|m| v.iter().any(|x| x > m)) {
+            return self.err(format!("{what} {v:?} exceeds {m}; an albedo lies in [0, 1]"));
+        }
+        Ok(Spectrum::from_array(v))
+    }
+
+    fn required<T: Clone>(&self, what: &str, v: &Option<T>) -> Result<T> {
+        match v {
+            Some(v) => Ok(v.clone()),
+            None => self.err(format!("`{what}` is required here")),
+        }
+    }
+
+    fn direction(&self, what: &str, v: Vec3) -> Result<Vec3A> {
+        self.finite(what, &v.to_array())?;
+        match v.try_normalize() {
+            Some(d) => Ok(d.into()),
+            None => self.err(format!("{what} has zero length; give a non-zero vector")),
+        }
+    }
+
+    fn transform(&self, steps: &[TransformStep]) -> Result<Transform> {
+        let mut t = Transform::IDENTITY;
+        for (i, step) in steps.iter().enumerate() {
+            let next = match step {
+                TransformStep::Translate(v) => {
+                    self.finite("translate", &v.to_array())?;
+                    Some(Transform::translate(*v))
+                }
+                TransformStep::Rotate { axis, angle } => {
+                    self.finite("rotate", &[axis.x, axis.y, axis.z, *angle])?;
+                    Transform::rotate(*axis, *angle)
+                }
+                TransformStep::Scale(s) => {
+                    let c = s.channels();
+                    self.finite("scale", &c)?;
+                    Transform::scale(Vec3::from_array(c))
+                }
+                TransformStep::Matrix(rows) => {
+                    self.finite("matrix", rows.as_flattened())?;
+                    Transform::from_rows(*rows)
+                }
+                TransformStep::Lookat { origin, target, up } => {
+                    Transform::look_at(*origin, *target, *up)
+                }
+            };
+            match next {
+                Some(n) => t = t.then(&n),
+                None => {
+                    return self.err(format!(
+                        "transform step {} is degenerate (zero axis or scale, origin = target, up \
+                         parallel to the view, or a matrix that is singular or not affine)",
+                        i + 1
+                    ));
+                }
+            }
+        }
+        Ok(t)
+    }
+}
+
+pub(super) fn build(path: &Path, source: &str, desc: SceneDesc) -> Result<Scene> {
+    let mut cx = Ctx { path, source, offset: 0, place: String::new() };
+
+    let mut media = Vec::new();
+    let mut names = HashMap::new();
+    for (name, m) in &desc.media {
+        cx.at(m.span().start, format!("media.{name}"));
+        if name == "vacuum" {
+            return cx.err("`vacuum` means no medium; choose another name");
+        }
+        names.insert(name.clone(), media.len() as u32);
+        media.push(medium(&cx, name, m.get_ref())?);
+    }
+    let lookup = |cx: &Ctx<'_>, what: &str, name: &Option<String>, fallback: Option<u32>| match name
+    {
+        None => Ok(fallback),
+        Some(n) if n == "vacuum" => Ok(None),
+        Some(n) => match names.get(n) {
+            Some(i) => Ok(Some(*i)),
+            None => {
+                let known: Vec<&str> = desc.media.keys().map(String::as_str).collect();
+                cx.err(format!(
+                    "{what} `{n}` is not a medium of this scene (known: vacuum, {})",
+                    known.join(", ")
+                ))
+            }
+        },
+    };
+    cx.at(desc.medium.as_ref().map_or(0, |m| m.span().start), "medium".into());
+    let global_medium =
+        lookup(&cx, "medium", &desc.medium.as_ref().map(|m| m.get_ref().clone()), None)?;
+
+    let cam = desc.camera.get_ref();
+    cx.at(desc.camera.span().start, "camera".into());
+    cx.finite(
+        "camera origin, target and up",
+        &[cam.origin, cam.target, cam.up].map(|v| v.to_array()).concat(),
+    )?;
+    let Some(to_world) = Transform::look_at(cam.origin, cam.target, cam.up) else {
+        return cx.err("origin equals target, or up is parallel to the view direction");
+    };
+    if !(cam.fov > 0.0 && cam.fov < 180.0) {
+        return cx.err(format!("fov {} must lie strictly between 0 and 180 degrees", cam.fov));
+    }
+    if cam.resolution.contains(&0) || cam.resolution.iter().any(|&r| r > 1 << 15) {
+        return cx
+            .err(format!("resolution {:?} must be between 1 and 32768 per axis", cam.resolution));
+    }
+    let camera = Camera::new(to_world, cam.fov, cam.fov_axis, cam.resolution);
+    let camera_medium = lookup(&cx, "camera medium", &cam.medium, global_medium)?;
+
+    let r = &desc.render;
+    cx.at(0, "render".into());
+    if r.spp == 0 {
+        return cx.err("spp must be at least 1");
+    }
+    if r.max_depth < -1 || r.max_depth > u32::MAX as i64 {
+        return cx.err(format!("max_depth {} must be -1 (unlimited) or a depth >= 0", r.max_depth));
+    }
+    let settings = RenderSettings {
+        spp: r.spp,
+        max_depth: (r.max_depth >= 0).then_some(r.max_depth as u32),
+        rr_depth: r.rr_depth,
+        seed: r.seed,
+    };
+
+    let mut shapes = Vec::new();
+    let mut surfaces = Vec::new();
+    let mut lights = Vec::new();
+    for (i, s) in desc.shapes.iter().enumerate() {
+        let d = s.get_ref();
+        cx.at(s.span().start, format!("shapes[{i}] ({})", d.kind));
+        shapes.push(geometry(&cx, d)?);
+        let light = match &d.emitter {
+            Some(e) => {
+                let radiance = cx.colour("emitter radiance", e.radiance, None)?;
+                lights.push(Light::Area { shape: i as u32, flip: d.flip_normals, radiance });
+                Some(lights.len() as u32 - 1)
+            }
+            None => None,
+        };
+        surfaces.push(Surface {
+            bsdf: bsdf(&cx, d.bsdf.as_ref())?,
+            interior: lookup(&cx, "interior", &d.interior, global_medium)?,
+            exterior: lookup(&cx, "exterior", &d.exterior, global_medium)?,
+            light,
+            flip: d.flip_normals,
+            kind: d.kind.clone(),
+        });
+    }
+    for (i, l) in desc.lights.iter().enumerate() {
+        let d = l.get_ref();
+        cx.at(l.span().start, format!("lights[{i}] ({})", d.kind));
+        lights.push(light(&cx, d)?);
+    }
+    let infinite_lights =
+        lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
+    let trackers = media.iter().map(Tracker::for_medium).collect();
+    let bvh = Bvh::build(&shapes);
+    Ok(Scene {
+        path: path.to_path_buf(),
+        shapes,
+        surfaces,
+        bvh,
+        media,
+        trackers,
+        lights,
+        infinite_lights,
+        camera,
+        camera_medium,
+        global_medium,
+        settings,
+    })
+}
+
+fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
+    let to_world = cx.transform(&d.transform)?;
+    let not_sphere = [("center", d.center.is_some()), ("radius", d.radius.is_some())];
+    let not_obj = [("filename", d.filename.is_some()), ("face_normals", d.face_normals.is_some())];
+    match d.kind.as_str() {
+        "sphere" => {
+            cx.only("spheres", &not_obj)?;
+            let center = d.center.unwrap_or(Vec3::ZERO);
+            let radius = d.radius.unwrap_or(1.0);
+            cx.finite("center", &center.to_array())?;
+            if !(radius > 0.0 && radius.is_finite()) {
+                return cx.err(format!("radius {radius} must be positive"));
+            }
+            let local = Transform::scale(Vec3::splat(radius))
+                .map(|s| s.then(&Transform::translate(center)))
+                .map(|t| t.then(&to_world))
+                .filter(Transform::is_similarity);
+            match local {
+                Some(t) => Ok(Geometry::Sphere(Sphere::new(t))),
+                None => cx.err(
+                    "a sphere's transform must scale uniformly (use an obj mesh for ellipsoids)",
+                ),
+            }
+        }
+        "cube" | "rectangle" | "disk" => {
+            cx.only(&format!("{}s", d.kind), &[not_sphere.as_slice(), &not_obj].concat())?;
+            Ok(match d.kind.as_str() {
+                "cube" => Geometry::Mesh(Mesh::cube(&to_world)),
+                "rectangle" => Geometry::Mesh(Mesh::rectangle(&to_world)),
+                _ => Geometry::Disk(Disk::new(to_world)),
+            })
+        }
+        "obj" => {
+            cx.only("obj meshes", &not_sphere)?;
+            let file = cx.file(&cx.required("filename", &d.filename)?);
+            if !file.is_file() {
+                return cx.err(format!("{}: no such file", file.display()));
+            }
+            Mesh::from_obj(&file, &to_world, d.face_normals.unwrap_or(false))
+                .map(Geometry::Mesh)
+                .or_else(|e| cx.err(format!("{}: {e}", file.display())))
+        }
+        other => cx
+            .err(format!("unknown shape type `{other}`; use sphere, cube, rectangle, disk or obj")),
+    }
+}
+
+fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
+    let Some(d) = d else {
+        return Ok(Bsdf::Diffuse {
+            reflectance: Texture::Constant(Spectrum::splat(0.5)),
+            two_sided: false,
+        });
+    };
+    let diffuse_only =
+        [("reflectance", d.reflectance.is_some()), ("two_sided", d.two_sided.is_some())];
+    let dielectric_only = [("int_ior", d.int_ior.is_some()), ("ext_ior", d.ext_ior.is_some())];
+    match d.kind.as_str() {
+        "null" => {
+            cx.only("null surfaces", &[diffuse_only.as_slice(), &dielectric_only].concat())?;
+            Ok(Bsdf::Null)
+        }
+        "diffuse" => {
+            cx.only("diffuse surfaces", &dielectric_only)?;
+            let reflectance = match &d.reflectance {
+                None => Texture::Constant(Spectrum::splat(0.5)),
+                Some(TextureDesc::Constant(c)) => {
+                    Texture::Constant(cx.colour("reflectance", *c, Some(1.0))?)
+                }
+                Some(TextureDesc::Checkerboard(c)) => {
+                    if c.kind != "checkerboard" {
+                        return cx.err(format!("unknown texture `{}`; use checkerboard", c.kind));
+                    }
+                    let scale = c.scale.unwrap_or([1.0, 1.0]);
+                    cx.finite("checkerboard scale", &scale)?;
+                    Texture::Checkerboard {
+                        color0: cx.colour(
+                            "color0",
+                            c.color0.unwrap_or(Rgb::Grey(0.4)),
+                            Some(1.0),
+                        )?,
+                        color1: cx.colour(
+                            "color1",
+                            c.color1.unwrap_or(Rgb::Grey(0.2)),
+                            Some(1.0),
+                        )?,
+                        scale: Vec2::from_array(scale),
+                    }
+                }
+            };
+            Ok(Bsdf::Diffuse { reflectance, two_sided: d.two_sided.unwrap_or(false) })
+        }
+        "dielectric" => {
+            cx.only("dielectrics", &diffuse_only)?;
+            // Mitsuba's defaults: BK7 glass inside, air outside.
+            let (int, ext) = (d.int_ior.unwrap_or(1.5046), d.ext_ior.unwrap_or(1.000277));
+            if !(int > 0.0 && ext > 0.0 && int.is_finite() && ext.is_finite()) {
+                return cx.err("indices of refraction must be positive");
+            }
+            Ok(Bsdf::Dielectric { eta: int / ext })
+        }
+        other => cx.err(format!("unknown bsdf type `{other}`; use null, diffuse or dielectric")),
+    }
+}
+
+fn phase(cx: &Ctx<'_>, d: Option<&PhaseDesc>) -> Result<PhaseFunction> {
+    match d {
+        None => Ok(PhaseFunction::Isotropic),
+        Some(p) if p.kind == "isotropic" => {
+            cx.only("isotropic phase functions", &[("g", p.g.is_some())])?;
+            Ok(PhaseFunction::Isotropic)
+        }
+        Some(p) if p.kind == "hg" => {
+            let g = cx.required("g", &p.g)?;
+            if !(g > -1.0 && g < 1.0) {
+                return cx.err(format!("HG g = {g} must lie strictly between -1 and 1"));
+            }
+            Ok(if g == 0.0 {
+                PhaseFunction::Isotropic
+            } else {
+                PhaseFunction::HenyeyGreenstein { g }
+            })
+        }
+        Some(p) => cx.err(format!("unknown phase function `{}`; use isotropic or hg", p.kind)),
+    }
+}
+
+fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
+    let scale = d.scale.unwrap_or(1.0);
+    if !(scale >= 0.0 && scale.is_finite()) {
+        return cx.err(format!("scale {scale} must be finite and non-negative"));
+    }
+    let sigma_t = cx.colour("sigma_t", d.sigma_t.unwrap_or(Rgb::Grey(1.0)), None)? * scale;
+    if !sigma_t.is_finite() {
+        return cx.err("sigma_t * scale overflows");
+    }
+    let constant_albedo = |a: &Option<AlbedoDesc>| match a {
+        None => Ok(Spectrum::splat(0.75)),
+        Some(AlbedoDesc::Constant(c)) => cx.colour("albedo", *c, Some(1.0)),
+        Some(AlbedoDesc::File(_)) => cx.err("this medium type takes a constant albedo, not a file"),
+    };
+    let kind = match d.kind.as_str() {
+        "homogeneous" => {
+            cx.only(
+                "homogeneous media",
+                &[
+                    ("density", d.density.is_some()),
+                    ("noise", d.noise.is_some()),
+                    ("transform", !d.transform.is_empty()),
+                ],
+            )?;
+            MediumKind::Homogeneous { sigma_t, albedo: constant_albedo(&d.albedo)? }
+        }
+        "grid" => {
+            cx.only("grid media", &[("noise", d.noise.is_some())])?;
+            let file = cx.file(&cx.required("density", &d.density)?);
+            let density = read_grid(cx, &file, &[1])?;
+            let albedo = match &d.albedo {
+                Some(AlbedoDesc::File(f)) => {
+                    AlbedoField::Grid(read_grid(cx, &cx.file(f), &[1, 3])?)
+                }
+                a => AlbedoField::Constant(constant_albedo(a)?),
+            };
+            if let AlbedoField::Grid(g) = &albedo
+                && g.max_value() > 1.0
+            {
+                return cx.err(format!(
+                    "albedo grid holds {} > 1; an albedo lies in [0, 1]",
+                    g.max_value()
+                ));
+            }
+            let to_world = cx.transform(&d.transform)?;
+            MediumKind::Heterogeneous(Box::new(Heterogeneous::new(
+                to_world,
+                DensityField::Grid(density),
+                1.0,
+                sigma_t,
+                albedo,
+            )))
+        }
+        "noise" => {
+            cx.only("noise media", &[("density", d.density.is_some())])?;
+            let noise = d.noise.unwrap_or_default();
+            let n = [noise.frequency, noise.amplitude, noise.threshold, noise.sharpness];
+            cx.finite("noise parameters", &n)?;
+            if !(noise.frequency > 0.0 && noise.sharpness > 0.0) || noise.octaves > 16 {
+                return cx.err("noise needs frequency > 0, sharpness > 0 and at most 16 octaves");
+            }
+            let to_world = cx.transform(&d.transform)?;
+            let albedo = AlbedoField::Constant(constant_albedo(&d.albedo)?);
+            MediumKind::Heterogeneous(Box::new(Heterogeneous::new(
+                to_world,
+                DensityField::Noise(noise),
+                1.0,
+                sigma_t,
+                albedo,
+            )))
+        }
+        other => {
+            return cx
+                .err(format!("unknown medium type `{other}`; use homogeneous, grid or noise"));
+        }
+    };
+    let emission = cx.colour("emission", d.emission.unwrap_or(Rgb::Grey(0.0)), None)?;
+    Ok(Medium { name: name.to_string(), kind, phase: phase(cx, d.phase.as_ref())?, emission })
+}
+
+fn read_grid(cx: &Ctx<'_>, file: &Path, channels: &[usize]) -> Result<Grid> {
+    let vol = VolGrid::read(file).or_else(|e| cx.err(e.to_string()))?;
+    if !channels.contains(&vol.channels) {
+        return cx.err(format!(
+            "{}: has {} channels; expected {}",
+            file.display(),
+            vol.channels,
+            channels.iter().map(|c| c.to_string()).collect::<Vec<_>>().join(" or ")
+        ));
+    }
+    Ok(Grid::new(vol))
+}
+
+fn light(cx: &Ctx<'_>, d: &LightDesc) -> Result<Light> {
+    let fields = [
+        ("position", d.position.is_some()),
+        ("target", d.target.is_some()),
+        ("intensity", d.intensity.is_some()),
+        ("cutoff_angle", d.cutoff_angle.is_some()),
+        ("beam_width", d.beam_width.is_some()),
+        ("direction", d.direction.is_some()),
+        ("irradiance", d.irradiance.is_some()),
+        ("angular_diameter", d.angular_diameter.is_some()),
+        ("radiance", d.radiance.is_some()),
+        ("filename", d.filename.is_some()),
+        ("scale", d.scale.is_some()),
+        ("transform", !d.transform.is_empty()),
+    ];
+    let allow = |kind: &str, allowed: &[&str]| {
+        let others: Vec<_> = fields.iter().filter(|(n, _)| !allowed.contains(n)).copied().collect();
+        cx.only(kind, &others)
+    };
+    let position = |cx: &Ctx<'_>| -> Result<Vec3A> {
+        let p = cx.required("position", &d.position)?;
+        cx.finite("position", &p.to_array())?;
+        Ok(p.into())
+    };
+    match d.kind.as_str() {
+        "point" => {
+            allow("point lights", &["position", "intensity"])?;
+            let intensity =
+                cx.colour("intensity", cx.required("intensity", &d.intensity)?, None)?;
+            Ok(Light::Point { position: position(cx)?, intensity })
+        }
+        "spot" => {
+            allow(
+                "spot lights",
+                &["position", "target", "intensity", "cutoff_angle", "beam_width"],
+            )?;
+            let p = position(cx)?;
+            let target = cx.required("target", &d.target)?;
+            let axis = cx.direction("target - position", Vec3::from(Vec3A::from(target) - p))?;
+            let cutoff = d.cutoff_angle.unwrap_or(20.0);
+            let beam = d.beam_width.unwrap_or(0.75 * cutoff);
+            if !(cutoff > 0.0 && cutoff <= 90.0 && beam >= 0.0 && beam <= cutoff) {
+                return cx.err(format!(
+                    "cutoff_angle {cutoff} must be in (0, 90] and beam_width {beam} in [0, cutoff_angle]"
+                ));
+            }
+            Ok(Light::Spot {
+                position: p,
+                frame: Frame::from_z(axis),
+                intensity: cx.colour("intensity", cx.required("intensity", &d.intensity)?, None)?,
+                cutoff: cutoff.to_radians(),
+                beam_width: beam.to_radians(),
+            })
+        }
+        "directional" => {
+            allow("directional lights", &["direction", "irradiance", "angular_diameter"])?;
+            let dir = cx.direction("direction", cx.required("direction", &d.direction)?)?;
+            let diameter = d.angular_diameter.unwrap_or(0.0);
+            if !(0.0..180.0).contains(&diameter) {
+                return cx.err(format!("angular_diameter {diameter} must be in [0, 180) degrees"));
+            }
+            let half = 0.5 * diameter.to_radians();
+            // 1 - cos(x) = 2 sin^2(x / 2) keeps precision for the sun's 0.27 degrees.
+            let one_minus_cos = 2.0 * (0.5 * half).sin().powi(2);
+            Ok(Light::Directional {
+                to_light: -dir,
+                irradiance: cx.colour(
+                    "irradiance",
+                    cx.required("irradiance", &d.irradiance)?,
+                    None,
+                )?,
+                one_minus_cos,
+            })
+        }
+        "constant" => {
+            allow("constant environments", &["radiance"])?;
+            Ok(Light::Constant {
+                radiance: cx.colour("radiance", cx.required("radiance", &d.radiance)?, None)?,
+            })
+        }
+        "envmap" => {
+            allow("environment maps", &["filename", "scale", "transform"])?;
+            let file = cx.file(&cx.required("filename", &d.filename)?);
+            let scale = d.scale.unwrap_or(1.0);
+            if !(scale >= 0.0 && scale.is_finite()) {
+                return cx.err(format!("scale {scale} must be finite and non-negative"));
+            }
+            let to_world = cx.transform(&d.transform)?;
+            let (w, h, pixels) =
+                read_exr(&file).or_else(|e| cx.err(format!("{}: {e}", file.display())))?;
+            if let Some(i) = pixels.iter().position(|p| !p.is_finite() || p.min_element() < 0.0) {
+                return cx.err(format!(
+                    "{}: pixel ({}, {}) is {:?}; radiance must be finite and non-negative",
+                    file.display(),
+                    i % w,
+                    i / w,
+                    pixels[i].to_array()
+                ));
+            }
+            let pixels = pixels.into_iter().map(|p| p * scale).collect();
+            EnvMap::new(w, h, pixels, to_world).map(|m| Light::EnvMap(Box::new(m))).map_or_else(
+                || cx.err(format!("{}: the image is black; remove the light", file.display())),
+                Ok,
+            )
+        }
+        other => cx.err(format!(
+            "unknown light type `{other}`; use point, spot, directional, constant or envmap \
+             (area lights are `emitter` tables on shapes)"
+        )),
+    }
+}
+
+/// Reads the first RGB(A) layer of an EXR file as row-major pixels.
+pub(crate) fn read_exr(file: &Path) -> std::result::Result<(usize, usize, Vec<Spectrum>), String> {
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        file,
+        |res, _| (res.width(), vec![Spectrum::ZERO; res.width() * res.height()]),
+        |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            px[pos.y() * *w + pos.x()] = Spectrum::new(r, g, b)
+        },
+    )
+    .map_err(|e| e.to_string())?;
+    let (w, pixels) = image.layer_data.channel_data.pixels;
+    let h = pixels.len() / w.max(1);
+    Ok((w, h, pixels))
+}

@@ -1,0 +1,293 @@
+//! The scene file's structure as plain serde types, mirroring the TOML one to one.
+//!
+//! Elements are flat tables with a `type` field and the union of their kinds' fields as
+//! options; `build` rejects a field that the element's kind does not take. Keeping the tables
+//! flat (rather than serde's tagged enums) keeps the TOML parser's exact line and column in
+//! every error, and `deny_unknown_fields` catches misspelt keys.
+
+use glam::Vec3;
+use serde::Deserialize;
+use std::collections::BTreeMap;
+use toml::Spanned;
+
+/// A colour: one number for grey or `[r, g, b]`.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
+#[serde(untagged)]
+pub enum Rgb {
+    /// The same value in every channel.
+    Grey(f32),
+    /// Red, green, blue.
+    Rgb([f32; 3]),
+}
+
+impl Rgb {
+    /// As three channels.
+    pub fn channels(self) -> [f32; 3] {
+        match self {
+            Rgb::Grey(v) => [v; 3],
+            Rgb::Rgb(c) => c,
+        }
+    }
+}
+
+/// The whole scene file.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SceneDesc {
+    /// Named values that `"$name"` strings refer to and `-D name=value` overrides.
+    #[serde(default)]
+    pub defaults: toml::Table,
+    /// The camera.
+    pub camera: Spanned<CameraDesc>,
+    /// Integrator and sampling settings.
+    #[serde(default)]
+    pub render: RenderDesc,
+    /// Name of the medium filling all space not enclosed by a shape with another medium.
+    pub medium: Option<Spanned<String>>,
+    /// Named media.
+    #[serde(default)]
+    pub media: BTreeMap<String, Spanned<MediumDesc>>,
+    /// Shapes.
+    #[serde(default)]
+    pub shapes: Vec<Spanned<ShapeDesc>>,
+    /// Lights other than area emitters (those are attached to shapes).
+    #[serde(default)]
+    pub lights: Vec<Spanned<LightDesc>>,
+}
+
+/// `[render]`: how the image is sampled.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RenderDesc {
+    /// Samples per pixel when the command line gives no budget.
+    pub spp: u32,
+    /// Longest path in scattering events (-1: unlimited), counted as Mitsuba counts it.
+    pub max_depth: i64,
+    /// Depth from which Russian roulette may end paths.
+    pub rr_depth: u32,
+    /// Seed of the random streams when the command line gives none.
+    pub seed: u64,
+}
+
+impl Default for RenderDesc {
+    fn default() -> Self {
+        Self { spp: 64, max_depth: -1, rr_depth: 5, seed: 0 }
+    }
+}
+
+/// `[camera]`: a perspective pinhole camera.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraDesc {
+    /// Eye position.
+    pub origin: Vec3,
+    /// Point looked at.
+    pub target: Vec3,
+    /// Up direction.
+    #[serde(default = "up")]
+    pub up: Vec3,
+    /// Field of view in degrees.
+    pub fov: f32,
+    /// Axis the field of view spans: "x" (default) or "y".
+    #[serde(default)]
+    pub fov_axis: crate::camera::FovAxis,
+    /// Width and height in pixels.
+    pub resolution: [u32; 2],
+    /// Medium around the camera (default: the global medium).
+    pub medium: Option<String>,
+}
+
+fn up() -> Vec3 {
+    Vec3::Y
+}
+
+/// One step of a transform list, applied in the order written.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(rename_all = "lowercase", deny_unknown_fields)]
+pub enum TransformStep {
+    /// Move by a vector.
+    Translate(Vec3),
+    /// Rotate about an axis through the origin, angle in degrees.
+    Rotate {
+        /// Rotation axis.
+        axis: Vec3,
+        /// Angle in degrees (counter-clockwise looking down the axis).
+        angle: f32,
+    },
+    /// Scale uniformly or per axis.
+    Scale(Rgb),
+    /// A 4x4 matrix, row-major (the last row must be 0 0 0 1).
+    Matrix([[f32; 4]; 4]),
+    /// Place the local frame at `origin` with +z towards `target`.
+    Lookat {
+        /// New origin.
+        origin: Vec3,
+        /// Point the local +z axis looks at.
+        target: Vec3,
+        /// Up direction.
+        #[serde(default = "up")]
+        up: Vec3,
+    },
+}
+
+/// `bsdf = { type = ... }`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BsdfDesc {
+    /// "null", "diffuse" or "dielectric".
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Diffuse: reflectance (a colour or a checkerboard table).
+    pub reflectance: Option<TextureDesc>,
+    /// Diffuse: reflect on both sides.
+    pub two_sided: Option<bool>,
+    /// Dielectric: interior index of refraction.
+    pub int_ior: Option<f32>,
+    /// Dielectric: exterior index of refraction.
+    pub ext_ior: Option<f32>,
+}
+
+/// A reflectance: a colour or `{ type = "checkerboard", ... }`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum TextureDesc {
+    /// A constant colour.
+    Constant(Rgb),
+    /// A checkerboard.
+    Checkerboard(CheckerboardDesc),
+}
+
+/// Mitsuba's checkerboard texture.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckerboardDesc {
+    /// Must be "checkerboard".
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Colour where the u and v halves agree (default 0.4).
+    pub color0: Option<Rgb>,
+    /// The other colour (default 0.2).
+    pub color1: Option<Rgb>,
+    /// Checks per unit of uv, one number or [u, v] (default 1).
+    pub scale: Option<[f32; 2]>,
+}
+
+/// `emitter = { radiance = ... }` on a shape.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct EmitterDesc {
+    /// Emitted radiance.
+    pub radiance: Rgb,
+}
+
+/// `[[shapes]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ShapeDesc {
+    /// "sphere", "cube", "rectangle", "disk" or "obj".
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Sphere: centre (default origin).
+    pub center: Option<Vec3>,
+    /// Sphere: radius (default 1).
+    pub radius: Option<f32>,
+    /// Obj: the file, relative to the scene file.
+    pub filename: Option<String>,
+    /// Obj: ignore the file's vertex normals.
+    pub face_normals: Option<bool>,
+    /// Transform steps applied in order.
+    #[serde(default)]
+    pub transform: Vec<TransformStep>,
+    /// Turn the shape inside out.
+    #[serde(default)]
+    pub flip_normals: bool,
+    /// The surface (default: diffuse 0.5).
+    pub bsdf: Option<BsdfDesc>,
+    /// Medium inside (behind the normals).
+    pub interior: Option<String>,
+    /// Medium outside.
+    pub exterior: Option<String>,
+    /// Make the shape an area light.
+    pub emitter: Option<EmitterDesc>,
+}
+
+/// `[media.NAME]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MediumDesc {
+    /// "homogeneous", "grid" or "noise".
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Extinction (homogeneous), or a per-channel tint of the density (grid, noise).
+    pub sigma_t: Option<Rgb>,
+    /// Single-scattering albedo: a colour, or (grid) a `.vol` file.
+    pub albedo: Option<AlbedoDesc>,
+    /// Multiplies the extinction.
+    pub scale: Option<f32>,
+    /// Grid: the density `.vol` file.
+    pub density: Option<String>,
+    /// Noise: cloud parameters.
+    pub noise: Option<crate::media::NoiseCloud>,
+    /// Grid, noise: places the unit cube.
+    #[serde(default)]
+    pub transform: Vec<TransformStep>,
+    /// Phase function (default isotropic).
+    pub phase: Option<PhaseDesc>,
+    /// Emitted radiance per unit absorption.
+    pub emission: Option<Rgb>,
+}
+
+/// A constant albedo or a grid file.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum AlbedoDesc {
+    /// A colour.
+    Constant(Rgb),
+    /// A `.vol` file of one or three channels.
+    File(String),
+}
+
+/// `phase = { type = ... }`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PhaseDesc {
+    /// "isotropic" or "hg".
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// HG mean cosine.
+    pub g: Option<f32>,
+}
+
+/// `[[lights]]`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LightDesc {
+    /// "point", "spot", "directional", "constant" or "envmap".
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// Point, spot: position.
+    pub position: Option<Vec3>,
+    /// Spot: point on the axis.
+    pub target: Option<Vec3>,
+    /// Point, spot: radiant intensity.
+    pub intensity: Option<Rgb>,
+    /// Spot: cutoff half-angle, degrees (default 20).
+    pub cutoff_angle: Option<f32>,
+    /// Spot: half-angle of full intensity, degrees (default 3/4 of the cutoff).
+    pub beam_width: Option<f32>,
+    /// Directional: direction the light travels.
+    pub direction: Option<Vec3>,
+    /// Directional: irradiance on a surface facing the light.
+    pub irradiance: Option<Rgb>,
+    /// Directional: angular diameter in degrees (default 0, a delta light).
+    pub angular_diameter: Option<f32>,
+    /// Constant: radiance.
+    pub radiance: Option<Rgb>,
+    /// Envmap: lat-long EXR file.
+    pub filename: Option<String>,
+    /// Envmap: multiplies the image.
+    pub scale: Option<f32>,
+    /// Envmap: rotates the map.
+    #[serde(default)]
+    pub transform: Vec<TransformStep>,
+}

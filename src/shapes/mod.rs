@@ -1,0 +1,144 @@
+//! Geometry: analytic spheres and disks and triangle meshes (which also carry rectangles and
+//! cubes), their ray intersection, surface parameterisation and area sampling for emitters.
+//!
+//! Everything is stored in world space once the scene is built, so a ray never needs to be
+//! transformed during traversal; the acceleration structure (`accel`) refers to primitives by
+//! (shape, index) and asks this module to intersect them.
+
+mod disk;
+mod mesh;
+mod sphere;
+
+pub use disk::Disk;
+pub use mesh::{Mesh, MeshError};
+pub use sphere::Sphere;
+
+use crate::math::{Aabb, Ray};
+use glam::{Vec2, Vec3A};
+
+/// Result of a primitive intersection: just enough to find the closest hit.
+#[derive(Clone, Copy, Debug)]
+pub struct PrimHit {
+    /// Ray parameter of the hit.
+    pub t: f32,
+    /// Barycentric coordinates (triangles) or unused.
+    pub b: Vec2,
+}
+
+/// A point on a surface with its local geometry.
+#[derive(Clone, Copy, Debug)]
+pub struct SurfaceHit {
+    /// Ray parameter.
+    pub t: f32,
+    /// Position.
+    pub p: Vec3A,
+    /// Unit geometric normal, on the shape's front side (after `flip_normals`).
+    pub ng: Vec3A,
+    /// Unit shading normal, on the same side as `ng`.
+    pub ns: Vec3A,
+    /// Texture coordinates.
+    pub uv: Vec2,
+    /// Index of the shape in the scene.
+    pub shape: u32,
+}
+
+/// A point sampled on a surface.
+#[derive(Clone, Copy, Debug)]
+pub struct AreaSample {
+    /// Position.
+    pub p: Vec3A,
+    /// Unit front-facing normal.
+    pub n: Vec3A,
+    /// Density with respect to solid angle as seen from the reference point.
+    pub pdf_solid_angle: f32,
+}
+
+/// The geometry of one shape.
+#[derive(Clone, Debug)]
+pub enum Geometry {
+    /// An analytic sphere.
+    Sphere(Sphere),
+    /// An analytic disk (an ellipse under non-uniform scaling).
+    Disk(Disk),
+    /// A triangle mesh.
+    Mesh(Mesh),
+}
+
+impl Geometry {
+    /// Number of primitives the acceleration structure should hold for this shape.
+    pub fn primitive_count(&self) -> usize {
+        match self {
+            Geometry::Mesh(m) => m.triangle_count(),
+            _ => 1,
+        }
+    }
+
+    /// Bounds of primitive `i`.
+    pub fn primitive_bounds(&self, i: u32) -> Aabb {
+        match self {
+            Geometry::Sphere(s) => s.bounds(),
+            Geometry::Disk(d) => d.bounds(),
+            Geometry::Mesh(m) => m.triangle_bounds(i),
+        }
+    }
+
+    /// Intersects primitive `i` within `(0, t_max)`.
+    #[inline]
+    pub fn intersect(&self, i: u32, ray: &Ray, t_max: f32) -> Option<PrimHit> {
+        match self {
+            Geometry::Sphere(s) => s.intersect(ray, t_max),
+            Geometry::Disk(d) => d.intersect(ray, t_max),
+            Geometry::Mesh(m) => m.intersect_triangle(i, ray, t_max),
+        }
+    }
+
+    /// Completes a hit into the full local geometry (without the shape index and flip).
+    pub fn surface(&self, i: u32, ray: &Ray, hit: PrimHit) -> (Vec3A, Vec3A, Vec3A, Vec2) {
+        match self {
+            Geometry::Sphere(s) => s.surface(ray, hit),
+            Geometry::Disk(d) => d.surface(ray, hit),
+            Geometry::Mesh(m) => m.surface(i, ray, hit),
+        }
+    }
+
+    /// Surface area.
+    pub fn area(&self) -> f32 {
+        match self {
+            Geometry::Sphere(s) => s.area(),
+            Geometry::Disk(d) => d.area(),
+            Geometry::Mesh(m) => m.area(),
+        }
+    }
+
+    /// Samples a point as seen from `reference`, returning its solid-angle density.
+    /// Normals are the geometry's own (before any flip).
+    pub fn sample(&self, reference: Vec3A, u: Vec2) -> Option<AreaSample> {
+        match self {
+            Geometry::Sphere(s) => s.sample(reference, u),
+            Geometry::Disk(d) => area_to_solid_angle(reference, d.sample_area(u), d.area()),
+            Geometry::Mesh(m) => area_to_solid_angle(reference, m.sample_area(u), m.area()),
+        }
+    }
+
+    /// Solid-angle density of `sample` for a point `p` with normal `n` seen from `reference`.
+    pub fn pdf(&self, reference: Vec3A, p: Vec3A, n: Vec3A) -> f32 {
+        match self {
+            Geometry::Sphere(s) => s.pdf(reference, p, n),
+            _ => area_pdf_to_solid_angle(reference, p, n, 1.0 / self.area()),
+        }
+    }
+}
+
+fn area_to_solid_angle(reference: Vec3A, (p, n): (Vec3A, Vec3A), area: f32) -> Option<AreaSample> {
+    let pdf = area_pdf_to_solid_angle(reference, p, n, 1.0 / area);
+    (pdf > 0.0 && pdf.is_finite()).then_some(AreaSample { p, n, pdf_solid_angle: pdf })
+}
+
+/// Converts an area density at `p` (normal `n`) into a solid-angle density from `reference`.
+#[inline]
+pub fn area_pdf_to_solid_angle(reference: Vec3A, p: Vec3A, n: Vec3A, pdf_area: f32) -> f32 {
+    let d = p - reference;
+    let dist2 = d.length_squared();
+    let cos = (d.dot(n)).abs() / dist2.sqrt();
+    if cos <= 0.0 || dist2 == 0.0 { 0.0 } else { pdf_area * dist2 / cos }
+}

@@ -1,0 +1,189 @@
+//! The `zerovar` command on good and bad input: bad input must exit non-zero with an error
+//! naming the file and the place, and never panic.
+
+use crate::common::{repo, temp_dir, write};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn zerovar(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_zerovar")).args(args).output().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs `check` and `render` on `scene` and expects both to fail with every `needle` in the
+/// message.
+fn assert_fails(scene: &Path, needles: &[&str]) {
+    let out = temp_dir().join("bad.exr");
+    for args in [
+        vec!["check", scene.to_str().unwrap()],
+        vec![
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--quiet",
+            "--spp",
+            "1",
+        ],
+    ] {
+        let o = zerovar(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: `{n}` missing from: {err}");
+        }
+    }
+}
+
+const GOOD: &str = r#"
+[defaults]
+g = 0.2
+
+[camera]
+origin = [0, 0, 4]
+target = [0, 0, 0]
+fov = 30
+resolution = [8, 6]
+
+[media.cloud]
+type = "grid"
+density = "cloud.vol"
+scale = 2
+phase = { type = "hg", g = "$g" }
+
+[[shapes]]
+type = "cube"
+bsdf = { type = "null" }
+interior = "cloud"
+
+[[lights]]
+type = "directional"
+direction = [0, -1, 0]
+irradiance = 1
+"#;
+
+fn vol(values: &[f32]) -> Vec<u8> {
+    let mut b = Vec::new();
+    zerovar::media::VolGrid { resolution: [2, 2, 1], channels: 1, data: values.to_vec() }
+        .write(&mut b)
+        .unwrap();
+    b
+}
+
+#[test]
+fn renders_a_scene_with_outputs_and_stats() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let scene = write("good.toml", GOOD);
+    let dir = temp_dir();
+    let exr = dir.join("good.exr");
+    let stats = dir.join("good.json");
+    let o = zerovar(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        exr.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--threads",
+        "2",
+        "-D",
+        "g=0.7",
+        "--stats",
+        stats.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(exr.is_file() && dir.join("good.png").is_file());
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["spp"], 2);
+    assert_eq!(json["invalid_samples"], 0);
+    assert!(json["paths_per_second"].as_f64().unwrap() > 0.0);
+    let o = zerovar(&["check", scene.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && out.contains("delta tracking"), "{out}");
+    // The README's first command works as written.
+    let o = zerovar(&["check", repo("scenes/fog-sphere.toml").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn bad_scenes_fail_clearly() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        ("malformed.toml", GOOD.replace("[camera]", "[camera"), vec!["malformed.toml:5:"]),
+        (
+            "unknown.toml",
+            GOOD.replace("fov = 30", "fov = 30\nfocal = 2"),
+            vec!["unknown.toml:9:", "focal"],
+        ),
+        (
+            "missing.toml",
+            GOOD.replace("cloud.vol", "nowhere.vol"),
+            vec!["missing.toml:11:", "media.cloud", "nowhere.vol"],
+        ),
+        (
+            "zerodir.toml",
+            GOOD.replace("[0, -1, 0]", "[0, 0, 0]"),
+            vec!["zerodir.toml:22:", "lights[0]", "zero length"],
+        ),
+        (
+            "negsigma.toml",
+            GOOD.replace("scale = 2", "scale = -2"),
+            vec!["negsigma.toml:11:", "scale -2"],
+        ),
+        (
+            "badg.toml",
+            GOOD.replace("g = 0.2", "g = 1.0"),
+            vec!["badg.toml:11:", "strictly between -1 and 1"],
+        ),
+    ];
+    for (name, text, needles) in cases {
+        assert_fails(&write(name, text), &needles);
+    }
+}
+
+#[test]
+fn bad_volume_files_fail_clearly() {
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("truncated.vol", vol(&[0.5, 1.0, 0.2, 0.0])[..60].to_vec(), "truncated"),
+        ("negative.vol", vol(&[0.5, -1.0, 0.2, 0.0]), "voxel (1, 0, 0)"),
+        ("nan.vol", vol(&[0.5, 1.0, f32::NAN, 0.0]), "voxel (0, 1, 0)"),
+        (
+            "garbage.vol",
+            b"not a volume at all, just some text padding it out to 48 bytes...".to_vec(),
+            "VOL",
+        ),
+    ];
+    for (name, bytes, needle) in cases {
+        write(name, bytes);
+        let scene = write(&format!("{name}.toml"), GOOD.replace("cloud.vol", name));
+        assert_fails(&scene, &[name, needle, "media.cloud"]);
+    }
+}
+
+#[test]
+fn bad_arguments_fail_clearly() {
+    let scene = repo("scenes/fog-sphere.toml");
+    let s = scene.to_str().unwrap();
+    for (args, needle) in [
+        (vec!["render", s, "--spp", "0"], "--spp 0"),
+        (vec!["render", s, "--time", "-1"], "--time"),
+        (vec!["render", s, "-o", "x.png"], ".exr"),
+        (vec!["render", s, "-D", "nosuch=1"], "nosuch"),
+        (vec!["render", s, "-D", "novalue"], "KEY=VALUE"),
+        (vec!["render", "/nonexistent/scene.toml"], "/nonexistent/scene.toml"),
+    ] {
+        let o = zerovar(&args);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && err.contains(needle) && !err.contains("panicked"),
+            "{args:?}: {err}"
+        );
+    }
+}

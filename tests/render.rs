@@ -1,0 +1,157 @@
+//! Whole renders: independence from the thread count, hard cases free of NaN and Inf, and
+//! every example scene loading.
+
+use crate::common::{repo, scene};
+use zerovar::render::{Budget, RenderOptions, render};
+
+const SMALL: &str = r#"
+[camera]
+origin = [0, 1, 4]
+target = [0, 0.5, 0]
+fov = 40
+resolution = [40, 30]
+
+[media.fog]
+type = "noise"
+albedo = [0.9, 0.8, 0.95]
+scale = 8
+sigma_t = [1, 1.5, 2]
+phase = { type = "hg", g = 0.5 }
+transform = [{ translate = [-0.5, -0.5, -0.5] }, { translate = [0, 0.6, 0] }]
+
+[[shapes]]
+type = "cube"
+transform = [{ scale = 0.6 }, { translate = [0, 0.6, 0] }]
+bsdf = { type = "null" }
+interior = "fog"
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 3 }]
+
+[[shapes]]
+type = "sphere"
+center = [1.1, 0.4, 0.3]
+radius = 0.4
+bsdf = { type = "dielectric" }
+
+[[lights]]
+type = "spot"
+position = [1, 3, 1]
+target = [0, 0, 0]
+intensity = 20
+
+[[lights]]
+type = "directional"
+direction = [1, -1, -0.5]
+irradiance = 1
+angular_diameter = 2
+"#;
+
+#[test]
+fn image_does_not_depend_on_thread_count() {
+    let s = scene(SMALL);
+    let run = |threads| {
+        let o = RenderOptions { budget: Budget::Samples(4), seed: 9, threads: Some(threads) };
+        render(&s, &o, &|_, _| {}).unwrap()
+    };
+    let (a, b) = (run(1), run(2));
+    assert_eq!(a.film.pixels, b.film.pixels, "1 and 2 threads differ");
+    assert_eq!(a.counters, b.counters);
+    let c = render(
+        &s,
+        &RenderOptions { budget: Budget::Samples(4), seed: 10, threads: Some(2) },
+        &|_, _| {},
+    )
+    .unwrap();
+    assert_ne!(a.film.pixels, c.film.pixels, "the seed must matter");
+}
+
+#[test]
+fn hard_case_renders_no_nan_or_inf() {
+    // Dense, nearly non-absorbing, sharply forward-scattering medium seen at grazing angles,
+    // with extreme extinction contrasts around it.
+    let text = r#"
+[camera]
+origin = [-6, 0.001, 0]
+target = [0, 0, 0]
+fov = 60
+resolution = [24, 16]
+
+[media.dense]
+type = "homogeneous"
+sigma_t = 1e5
+albedo = 0.999
+phase = { type = "hg", g = 0.99 }
+
+[media.thin]
+type = "homogeneous"
+sigma_t = [1e-6, 1e-3, 1]
+albedo = 1
+phase = { type = "hg", g = -0.999 }
+
+[media.cloud]
+type = "noise"
+scale = 200
+albedo = 0.999
+phase = { type = "hg", g = 0.99 }
+transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }, { translate = [0, 0, 1.5] }]
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 10 }]
+bsdf = { type = "null" }
+interior = "dense"
+exterior = "thin"
+
+[[shapes]]
+type = "cube"
+transform = [{ translate = [0, 0, 1.5] }]
+bsdf = { type = "null" }
+interior = "cloud"
+exterior = "thin"
+
+[[shapes]]
+type = "sphere"
+center = [0, 0.5, -1.5]
+radius = 0.5
+bsdf = { type = "dielectric" }
+exterior = "thin"
+interior = "thin"
+
+[[lights]]
+type = "directional"
+direction = [0.3, -1, 0.2]
+irradiance = 5
+angular_diameter = 0.53
+
+[[lights]]
+type = "constant"
+radiance = 0.3
+
+[[lights]]
+type = "point"
+position = [0, 0.0001, 0]
+intensity = 1
+"#;
+    let s = scene(&text.replace("\n[camera]", "medium = \"thin\"\n\n[camera]"));
+    let o = RenderOptions { budget: Budget::Samples(8), seed: 1, threads: None };
+    let r = render(&s, &o, &|_, _| {}).unwrap();
+    assert_eq!(r.counters.invalid_samples, 0, "NaN or Inf samples: {:?}", r.counters);
+    assert!(r.film.image().iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+    assert!(r.film.average().iter().any(|v| *v > 0.0), "the hard case rendered black");
+}
+
+#[test]
+fn example_scenes_load() {
+    let mut n = 0;
+    for entry in std::fs::read_dir(repo("scenes")).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let s = zerovar::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
+            assert!(!s.lights.is_empty(), "{} has no light", path.display());
+            n += 1;
+        }
+    }
+    assert!(n >= 4, "expected the four example scenes, found {n}");
+}
