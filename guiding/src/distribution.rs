@@ -1,0 +1,372 @@
+//! The per-thread sampling distribution a renderer queries at each scattering vertex in a
+//! medium: the incident-radiance mixture of the region at the vertex, optionally multiplied by
+//! the phase function (or a clamped cosine), with sampling, pdf and radiance estimates.
+//!
+//! It holds fixed-size arrays only, so one value per thread is reused for every vertex
+//! without touching the allocator. `sample` and `pdf` describe the same normalised mixture,
+//! so `pdf(sample(u))` equals the pdf returned by `sample_with_pdf(u)` to float rounding.
+
+use crate::field::Field;
+use crate::hg::{self, HG_LOBES};
+use crate::mixture::MAX_LOBES;
+use crate::product::{COSINE_KAPPA, LobeSet};
+use crate::vmf;
+use glam::{Vec2, Vec3};
+
+/// Lobes a product can have: every mixture lobe times every lobe of the phase-function fit.
+pub const MAX_PRODUCT_LOBES: usize = MAX_LOBES * HG_LOBES;
+
+/// What `sample` and `pdf` currently describe.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProductKind {
+    /// The incident-radiance mixture alone.
+    None,
+    /// Incident radiance times the Henyey-Greenstein phase function.
+    HenyeyGreenstein,
+    /// Incident radiance times a clamped cosine.
+    Cosine,
+    /// The product had no usable weight (corrupt input); the distribution fell back to the
+    /// phase function's (or cosine's) own vMF fit.
+    Fallback,
+}
+
+/// A guided directional distribution at one point of a medium (see the module docs).
+///
+/// Directions are incident-light directions pointing away from the vertex, which are also the
+/// new path directions. Typical use per vertex:
+/// ```
+/// # use zerovar_guiding::{Field, FieldConfig, VolumeDistribution};
+/// # use glam::{Vec2, Vec3};
+/// # let field = Field::new(FieldConfig::default()).unwrap();
+/// let mut d = VolumeDistribution::default(); // once per thread
+/// if d.init(&field, Vec3::ZERO, 0.5) {
+///     d.apply_hg_product(Vec3::Z, 0.7);
+///     let (dir, pdf) = d.sample_with_pdf(Vec2::new(0.3, 0.6));
+/// } // else: sample the phase function
+/// ```
+#[derive(Clone, Debug)]
+pub struct VolumeDistribution {
+    base: LobeSet<MAX_LOBES>,
+    product: LobeSet<MAX_PRODUCT_LOBES>,
+    kind: ProductKind,
+    fluence: f32,
+    region: Option<u32>,
+}
+
+impl Default for VolumeDistribution {
+    fn default() -> Self {
+        Self {
+            base: LobeSet::default(),
+            product: LobeSet::default(),
+            kind: ProductKind::None,
+            fluence: 0.0,
+            region: None,
+        }
+    }
+}
+
+impl VolumeDistribution {
+    /// Loads the region of `field` at `pos` (`u` in `[0, 1)` drives the stochastic spatial
+    /// filter, if enabled). Returns false, and becomes a uniform distribution with zero
+    /// radiance, when the field has no trained region there: the renderer should then fall
+    /// back to phase-function sampling. Any product applied before is dropped.
+    pub fn init(&mut self, field: &Field, pos: Vec3, u: f32) -> bool {
+        self.kind = ProductKind::None;
+        match field.lookup_index(pos, u) {
+            Some(index) => {
+                let region = &field.regions()[index];
+                self.base.set_from(region.mixture());
+                self.fluence = region.fluence();
+                self.region = Some(index as u32);
+                true
+            }
+            None => {
+                self.base.set_uniform();
+                self.fluence = 0.0;
+                self.region = None;
+                false
+            }
+        }
+    }
+
+    /// Index of the region loaded by `init`, if any (stable until the next `Field::update`).
+    pub fn region_index(&self) -> Option<u32> {
+        self.region
+    }
+
+    /// Replaces the distribution by the normalised product of the incident-radiance mixture
+    /// with the Henyey-Greenstein phase function, `cos theta = dot(ray_dir, new_dir)`;
+    /// `ray_dir` is the unit direction the path was travelling, `g > 0` scatters forward.
+    pub fn apply_hg_product(&mut self, ray_dir: Vec3, g: f32) {
+        let fit = hg::hg_vmf_fit(g);
+        let axis = ray_dir * fit.axis_sign;
+        let factor: [(Vec3, f32, f32); HG_LOBES] =
+            std::array::from_fn(|i| (axis, fit.kappa[i], fit.weight[i]));
+        self.kind = if self.product.set_product(&self.base, &factor) {
+            ProductKind::HenyeyGreenstein
+        } else {
+            ProductKind::Fallback
+        };
+    }
+
+    /// Replaces the distribution by the normalised product of the incident-radiance mixture
+    /// with the clamped cosine `max(0, dot(normal, dir))`, approximated by one vMF lobe.
+    pub fn apply_cosine_product(&mut self, normal: Vec3) {
+        let factor = [(normal, COSINE_KAPPA, 1.0)];
+        self.kind = if self.product.set_product(&self.base, &factor) {
+            ProductKind::Cosine
+        } else {
+            ProductKind::Fallback
+        };
+    }
+
+    /// Drops any product, so `sample` and `pdf` describe the incident radiance alone.
+    pub fn clear_product(&mut self) {
+        self.kind = ProductKind::None;
+    }
+
+    /// What `sample` and `pdf` currently describe.
+    pub fn product_kind(&self) -> ProductKind {
+        self.kind
+    }
+
+    /// Draws a unit direction from two uniform numbers in `[0, 1)`.
+    #[inline]
+    pub fn sample(&self, u: Vec2) -> Vec3 {
+        match self.kind {
+            ProductKind::None => self.base.sample(u),
+            _ => self.product.sample(u),
+        }
+    }
+
+    /// The density of `sample` at the unit direction `dir` (per steradian).
+    #[inline]
+    pub fn pdf(&self, dir: Vec3) -> f32 {
+        match self.kind {
+            ProductKind::None => self.base.pdf(dir),
+            _ => self.product.pdf(dir),
+        }
+    }
+
+    /// Draws a direction and returns it with its density.
+    #[inline]
+    pub fn sample_with_pdf(&self, u: Vec2) -> (Vec3, f32) {
+        let d = self.sample(u);
+        (d, self.pdf(d))
+    }
+
+    /// The normalised incident-radiance mixture `V_L(dir)`, before any product (for
+    /// resampling schemes that weigh candidates by incident radiance).
+    #[inline]
+    pub fn incident_radiance_pdf(&self, dir: Vec3) -> f32 {
+        self.base.pdf(dir)
+    }
+
+    /// The estimated incident radiance `L(x, dir) = Phi(x) V_L(dir)`, from direction `dir`
+    /// (pointing away from the vertex).
+    #[inline]
+    pub fn incident_radiance(&self, dir: Vec3) -> f32 {
+        self.fluence * self.base.pdf(dir)
+    }
+
+    /// The estimated fluence `Phi(x)`, the integral of incident radiance over the sphere.
+    #[inline]
+    pub fn fluence(&self) -> f32 {
+        self.fluence
+    }
+
+    /// The estimated in-scattered radiance `L_s(x, ray_dir) = int L(x, w) f_HG(dot(ray_dir, w))
+    /// dw` for a path travelling along `ray_dir` (HG convention as in `apply_hg_product`).
+    ///
+    /// Exact for the vMF fit of HG (each term is a closed-form vMF convolution); the fit's
+    /// L1 error bounds the difference to the true HG convolution by that error times the
+    /// largest incident radiance.
+    pub fn inscattered_radiance(&self, ray_dir: Vec3, g: f32) -> f32 {
+        if self.fluence == 0.0 {
+            return 0.0;
+        }
+        let fit = hg::hg_vmf_fit(g);
+        let axis = (ray_dir * fit.axis_sign).as_dvec3();
+        let fit_norms: [f64; HG_LOBES] =
+            std::array::from_fn(|i| vmf::normalization_f64(f64::from(fit.kappa[i])));
+        let mut sum = 0.0f64;
+        for k in 0..self.base.len() {
+            let (mean, kappa, weight) = self.base.lobe(k);
+            if weight <= 0.0 {
+                continue;
+            }
+            let (m, ka) = (mean.as_dvec3(), f64::from(kappa));
+            let lin = f64::from(weight) * f64::from(self.base.norm(k));
+            let d2 = (m - axis).length_squared();
+            for ((&fk, &fw), &fn_) in fit.kappa.iter().zip(&fit.weight).zip(&fit_norms) {
+                if fw > 0.0 {
+                    // The closed-form convolution (product integral) of the two lobes.
+                    let kb = f64::from(fk);
+                    let kp = (m * ka + axis * kb).length();
+                    let denom = kp + ka + kb;
+                    let e = if denom > 0.0 { -ka * kb * d2 / denom } else { 0.0 };
+                    sum += lin * f64::from(fw) * fn_ / vmf::normalization_f64(kp) * e.exp();
+                }
+            }
+        }
+        (f64::from(self.fluence) * sum) as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::hg::tests::{GS, HG_FIT_L1_BOUND, zonal_integral};
+    use crate::mixture::Mixture;
+    use crate::testutil::MultiGrid;
+    use crate::vmf::VmfLobe;
+    use glam::DVec3;
+    use rand_pcg::Pcg32;
+    use rand_pcg::rand_core::Rng;
+
+    fn u01(rng: &mut Pcg32) -> f32 {
+        (rng.next_u32() >> 8) as f32 * (1.0 / (1u32 << 24) as f32)
+    }
+
+    fn with_mixture(m: &Mixture, fluence: f32) -> VolumeDistribution {
+        let mut d = VolumeDistribution::default();
+        d.base.set_from(m);
+        d.fluence = fluence;
+        d
+    }
+
+    fn radiance_mixture(kappa: f32) -> Mixture {
+        Mixture::new(&[
+            VmfLobe { mean: Vec3::new(0.2, 0.1, 1.0), kappa, weight: 0.7 },
+            VmfLobe { mean: Vec3::new(-1.0, 0.3, 0.0), kappa: 4.0, weight: 0.3 },
+        ])
+        .unwrap()
+    }
+
+    const RAY: Vec3 = Vec3::new(0.0, 0.6, 0.8);
+
+    /// Quadrature grids on every sharp feature of a product.
+    fn product_grid(d: &VolumeDistribution) -> MultiGrid {
+        let features: Vec<(DVec3, f64, f64)> = (0..d.product.len())
+            .map(|k| d.product.lobe(k))
+            .map(|(m, kappa, w)| (m.as_dvec3(), f64::from(kappa), f64::from(w)))
+            .collect();
+        MultiGrid::new(&features)
+    }
+
+    #[test]
+    fn hg_product_is_normalised_and_sampling_matches_pdf() {
+        let mut rng = Pcg32::new(21, 4);
+        for &kappa in &[0.0f32, 1.0, 100.0, 1e4] {
+            for &g in &GS {
+                let mut d = with_mixture(&radiance_mixture(kappa), 1.0);
+                d.apply_hg_product(RAY, g);
+                assert_eq!(d.product_kind(), ProductKind::HenyeyGreenstein);
+                let grid = product_grid(&d);
+                let pdf = |w: DVec3| f64::from(d.pdf(w.as_vec3()));
+                let integral = grid.integrate(&pdf);
+                assert!((integral - 1.0).abs() < 2e-4, "kappa {kappa} g {g}: {integral}");
+                let mut samples = Vec::with_capacity(30_000);
+                for _ in 0..30_000 {
+                    let u = Vec2::new(u01(&mut rng), u01(&mut rng));
+                    let (w, p) = d.sample_with_pdf(u);
+                    assert_eq!(p, d.pdf(w));
+                    assert!(p > 0.0 && p.is_finite());
+                    samples.push(w.as_dvec3());
+                }
+                let mut u = || f64::from(u01(&mut rng));
+                grid.chi2(&samples, &pdf, &mut u)
+                    .assert_pass(1e-3, &format!("kappa {kappa} g {g}"));
+            }
+        }
+    }
+
+    #[test]
+    fn cosine_product_is_normalised_and_sampling_matches_pdf() {
+        let mut rng = Pcg32::new(5, 8);
+        let mut d = with_mixture(&radiance_mixture(30.0), 1.0);
+        let normal = Vec3::new(0.0, 0.0, 1.0);
+        d.apply_cosine_product(normal);
+        assert_eq!(d.product_kind(), ProductKind::Cosine);
+        let grid = product_grid(&d);
+        let pdf = |w: DVec3| f64::from(d.pdf(w.as_vec3()));
+        assert!((grid.integrate(&pdf) - 1.0).abs() < 1e-4);
+        let samples: Vec<DVec3> = (0..40_000)
+            .map(|_| d.sample(Vec2::new(u01(&mut rng), u01(&mut rng))).as_dvec3())
+            .collect();
+        let mut u = || f64::from(u01(&mut rng));
+        grid.chi2(&samples, &pdf, &mut u).assert_pass(1e-3, "cosine product");
+    }
+
+    #[test]
+    fn uniform_radiance_times_hg_is_the_hg_fit() {
+        // With isotropic incident light the product is the phase function's own fit.
+        let mut d = with_mixture(&Mixture::uniform(), 1.0);
+        for &g in &GS {
+            d.apply_hg_product(RAY, g);
+            let fit = hg::hg_vmf_fit(g);
+            for w in [RAY, -RAY, Vec3::X, Vec3::new(0.0, 0.8, 0.6)] {
+                let expect = fit.pdf(RAY.dot(w));
+                assert!((d.pdf(w) - expect).abs() <= 1e-4 * expect, "g {g}: {} {expect}", d.pdf(w));
+            }
+        }
+    }
+
+    /// HG in double precision from `1 - cos = |a - b|^2 / 2`, for reference integrals of
+    /// sharp phase functions.
+    fn hg_pdf_f64(ray: DVec3, w: DVec3, g: f32) -> f64 {
+        let g = f64::from(g);
+        let one_minus_cos = 0.5 * (ray - w.normalize()).length_squared();
+        let denom = (1.0 - g) * (1.0 - g) + 2.0 * g * one_minus_cos;
+        (1.0 - g * g) / (4.0 * std::f64::consts::PI * denom * denom.sqrt())
+    }
+
+    #[test]
+    fn inscattered_radiance_matches_quadrature() {
+        for &kappa in &[0.0f32, 2.0, 50.0] {
+            let m = radiance_mixture(kappa);
+            let fluence = 3.0f32;
+            let d = with_mixture(&m, fluence);
+            let l = |w: DVec3| f64::from(fluence) * f64::from(m.pdf(w.as_vec3()));
+            let l_max = f64::from(fluence)
+                * f64::from(m.pdf(m.lobes()[0].mean)).max(f64::from(m.pdf(m.lobes()[1].mean)));
+            for &g in &GS {
+                let got = f64::from(d.inscattered_radiance(RAY, g));
+                // Exact against the fitted phase function...
+                let fit = hg::hg_vmf_fit(g);
+                let axis = RAY.as_dvec3() * f64::from(fit.axis_sign);
+                // The integrand's features: the phase lobes and the radiance lobes.
+                let mut features: Vec<(DVec3, f64, f64)> = (0..HG_LOBES)
+                    .map(|i| (axis, f64::from(fit.kappa[i]), f64::from(fit.weight[i])))
+                    .collect();
+                features.extend(
+                    m.lobes()
+                        .iter()
+                        .map(|l| (l.mean.as_dvec3(), f64::from(l.kappa), f64::from(l.weight))),
+                );
+                let grid = MultiGrid::new(&features);
+                let with_fit =
+                    grid.integrate(&|w| l(w) * f64::from(fit.pdf_between(RAY, w.as_vec3())));
+                assert!((got - with_fit).abs() < 1e-4 * with_fit, "{kappa} {g}: {got} {with_fit}");
+                // ...and within the fit's L1 error times the largest radiance of true HG.
+                let with_hg = grid.integrate(&|w| l(w) * hg_pdf_f64(RAY.as_dvec3(), w, g));
+                assert!(
+                    (got - with_hg).abs() <= HG_FIT_L1_BOUND * l_max,
+                    "{kappa} {g}: {got} vs true HG {with_hg}"
+                );
+            }
+        }
+        // Sanity of the quadrature helper on the same grids: HG is normalised.
+        assert!((zonal_integral(&|c| f64::from(hg::hg_pdf(c as f32, 0.9))) - 1.0).abs() < 1e-4);
+    }
+
+    #[test]
+    fn incident_radiance_and_fluence() {
+        let m = radiance_mixture(10.0);
+        let d = with_mixture(&m, 2.5);
+        assert_eq!(d.fluence(), 2.5);
+        let w = Vec3::new(0.3, 0.3, 0.9).normalize();
+        assert!((d.incident_radiance(w) - 2.5 * m.pdf(w)).abs() < 1e-6);
+        assert_eq!(d.incident_radiance_pdf(w), d.pdf(w));
+    }
+}

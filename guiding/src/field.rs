@@ -1,0 +1,345 @@
+//! The guiding field: a kd-tree of regions, each with a fitted incident-radiance mixture and a
+//! fluence estimate, trained between render passes and queried during them.
+//!
+//! Ownership separates the two phases: `update` takes `&mut self` (between passes), every
+//! query takes `&self` (while rendering, from any number of threads). An update routes the
+//! samples to leaves, splits leaves that have seen enough samples, then refits every region
+//! that received samples, in parallel. Each region's fit reads only its own samples in input
+//! order, so the result does not depend on the number of threads.
+
+use crate::GuidingError;
+use crate::config::{FieldConfig, MAX_NEIGHBOURS, SampleKind};
+use crate::em::{self, EmSettings, EmStats, WeightedDir};
+use crate::mixture::Mixture;
+use crate::sample::{Sample, validate_all};
+use crate::splitmerge;
+use crate::stats::FieldStats;
+use crate::tree::{KdTree, SpatialStats};
+use glam::Vec3;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// A leaf of the spatial tree: the incident radiance `L(x, w) = Phi(x) V_L(w)` there.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Region {
+    pub(crate) mixture: Mixture,
+    fluence: f32,
+    pub(crate) em: EmStats,
+    pub(crate) split_merge: splitmerge::LobeStats,
+    spatial: SpatialStats,
+    centre: Vec3,
+    spread: f32,
+    depth: u32,
+    neighbours: [u32; MAX_NEIGHBOURS],
+    neighbour_count: u8,
+}
+
+impl Region {
+    fn new(config: &FieldConfig) -> Self {
+        Self {
+            mixture: em::initial_mixture(config.initial_lobes, config.initial_kappa),
+            fluence: 0.0,
+            em: EmStats::default(),
+            split_merge: splitmerge::LobeStats::default(),
+            spatial: SpatialStats::default(),
+            centre: Vec3::ZERO,
+            spread: 0.0,
+            depth: 0,
+            neighbours: [0; MAX_NEIGHBOURS],
+            neighbour_count: 0,
+        }
+    }
+
+    /// The fitted directional distribution `V_L` of incident radiance (normalised).
+    pub fn mixture(&self) -> &Mixture {
+        &self.mixture
+    }
+
+    /// The fluence estimate `Phi(x)`: the mean of `radiance / pdf` over the region's samples,
+    /// an unbiased estimate of the integral of incident radiance over the sphere.
+    pub fn fluence(&self) -> f32 {
+        self.fluence
+    }
+
+    /// Samples the region has learned from (after the step-size scaling of older batches).
+    pub fn sample_count(&self) -> f64 {
+        self.em.count
+    }
+
+    /// Mean position of the samples the region has seen since it was created.
+    pub fn centre(&self) -> Vec3 {
+        self.centre
+    }
+
+    /// Depth of the region's leaf in the tree.
+    pub fn depth(&self) -> u32 {
+        self.depth
+    }
+
+    /// True once the region has seen a sample carrying light; untrained regions are not
+    /// returned by lookups.
+    pub fn is_trained(&self) -> bool {
+        self.em.total_weight > 0.0
+    }
+}
+
+/// The guiding field (see the module documentation).
+#[derive(Clone, Debug)]
+pub struct Field {
+    pub(crate) config: FieldConfig,
+    pub(crate) tree: KdTree,
+    pub(crate) regions: Vec<Region>,
+    pub(crate) iterations: u32,
+    pub(crate) total_samples: u64,
+    pub(crate) last_update_seconds: f64,
+    trained_regions: usize,
+}
+
+impl Field {
+    /// An empty field; fails if the configuration is invalid.
+    pub fn new(config: FieldConfig) -> Result<Self, GuidingError> {
+        config.validate()?;
+        let root = Region::new(&config);
+        Ok(Self::from_parts(config, KdTree::new(), vec![root], 0, 0, 0.0))
+    }
+
+    pub(crate) fn from_parts(
+        config: FieldConfig,
+        tree: KdTree,
+        regions: Vec<Region>,
+        iterations: u32,
+        total_samples: u64,
+        last_update_seconds: f64,
+    ) -> Self {
+        let trained_regions = regions.iter().filter(|r| r.is_trained()).count();
+        Self {
+            config,
+            tree,
+            regions,
+            iterations,
+            total_samples,
+            last_update_seconds,
+            trained_regions,
+        }
+    }
+
+    /// The configuration the field was created with.
+    pub fn config(&self) -> &FieldConfig {
+        &self.config
+    }
+
+    /// True once some region has been trained, so lookups can succeed.
+    pub fn is_trained(&self) -> bool {
+        self.trained_regions > 0
+    }
+
+    /// Number of completed updates.
+    pub fn iterations(&self) -> u32 {
+        self.iterations
+    }
+
+    /// All regions, indexed as `lookup_index` and `VolumeDistribution::region_index` report.
+    pub fn regions(&self) -> &[Region] {
+        &self.regions
+    }
+
+    /// The trained region for a query at `pos`, or `None` when there is none (the renderer
+    /// then falls back to unguided sampling). `u` in `[0, 1)` drives the stochastic spatial
+    /// filter when `FieldConfig::spatial_filter` is on, and is ignored otherwise.
+    #[inline]
+    pub fn lookup(&self, pos: Vec3, u: f32) -> Option<&Region> {
+        self.lookup_index(pos, u).map(|i| &self.regions[i])
+    }
+
+    /// Like [`lookup`](Self::lookup), returning the region's index.
+    ///
+    /// With the spatial filter on, the candidates are the region containing `pos` and those
+    /// of its nearest regions whose centre lies within `filter_radius` times the region's
+    /// sample spread of `pos`; `u` picks one uniformly. This blurs region boundaries in
+    /// expectation, as a stochastic box filter does, without blending mixtures.
+    #[inline]
+    pub fn lookup_index(&self, pos: Vec3, u: f32) -> Option<usize> {
+        if self.trained_regions == 0 {
+            return None;
+        }
+        let (r, _) = self.tree.lookup(pos);
+        let region = &self.regions[r];
+        if !self.config.spatial_filter || region.neighbour_count == 0 {
+            return region.is_trained().then_some(r);
+        }
+        let radius = self.config.filter_radius * region.spread;
+        let radius2 = radius * radius;
+        let mut candidates = [0u32; MAX_NEIGHBOURS + 1];
+        let mut n = 0;
+        if region.is_trained() {
+            candidates[0] = r as u32;
+            n = 1;
+        }
+        for &j in &region.neighbours[..region.neighbour_count as usize] {
+            if (self.regions[j as usize].centre - pos).length_squared() <= radius2 {
+                candidates[n] = j;
+                n += 1;
+            }
+        }
+        if n == 0 {
+            return None;
+        }
+        let pick = ((u.clamp(0.0, 1.0) * n as f32) as usize).min(n - 1);
+        Some(candidates[pick] as usize)
+    }
+
+    /// Trains the field on one pass's samples.
+    ///
+    /// Fails, changing nothing, if any sample is invalid (non-finite position, non-unit
+    /// direction, negative or non-finite radiance, non-positive or non-finite pdf); the error
+    /// names the first bad sample's index. Samples whose kind does not match
+    /// `FieldConfig::samples` are ignored.
+    pub fn update(&mut self, samples: &[Sample]) -> Result<(), GuidingError> {
+        let start = Instant::now();
+        validate_all(samples)?;
+        let accepted = samples.iter().enumerate().filter(|(_, s)| match self.config.samples {
+            SampleKind::All => true,
+            SampleKind::Volume => s.volume,
+            SampleKind::Surface => !s.volume,
+        });
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); self.regions.len()];
+        let mut accepted_count = 0u64;
+        for (i, s) in accepted {
+            lists[self.tree.lookup(s.position).0].push(i as u32);
+            accepted_count += 1;
+        }
+        self.refine(samples, &mut lists);
+
+        let settings = self.em_settings();
+        let config = &self.config;
+        self.regions.par_iter_mut().zip(lists.par_iter()).for_each(|(region, list)| {
+            if list.is_empty() {
+                return;
+            }
+            let dirs: Vec<WeightedDir> = list
+                .iter()
+                .map(|&i| {
+                    let s = &samples[i as usize];
+                    WeightedDir { dir: s.direction.normalize(), weight: s.weight(), pdf: s.pdf }
+                })
+                .collect();
+            em::update(&mut region.mixture, &mut region.em, &dirs, &settings);
+            if config.split_merge {
+                splitmerge::update(region, &dirs, config);
+            }
+            let fluence =
+                if region.em.count > 0.0 { region.em.total_weight / region.em.count } else { 0.0 };
+            region.fluence = fluence.min(f64::from(f32::MAX)) as f32;
+            if region.spatial.count > 0.0 {
+                region.centre = region.spatial.mean().as_vec3();
+                region.spread = region.spatial.variance().element_sum().sqrt() as f32;
+            }
+        });
+        self.trained_regions = self.regions.iter().filter(|r| r.is_trained()).count();
+        if self.config.spatial_filter {
+            self.build_neighbours();
+        }
+        self.iterations += 1;
+        self.total_samples += accepted_count;
+        self.last_update_seconds = start.elapsed().as_secs_f64();
+        Ok(())
+    }
+
+    pub(crate) fn em_settings(&self) -> EmSettings {
+        let c = &self.config;
+        EmSettings {
+            iterations: c.em_iterations,
+            weight_prior: f64::from(c.weight_prior),
+            mean_cosine_prior: f64::from(c.mean_cosine_prior),
+            mean_cosine_prior_strength: f64::from(c.mean_cosine_prior_strength),
+            max_kappa: f64::from(c.max_kappa),
+            step_exponent: f64::from(c.step_exponent),
+            initial_kappa: c.initial_kappa,
+        }
+    }
+
+    /// Adds the batch's positions to the leaves' spatial statistics and splits every leaf
+    /// that has now seen enough samples, recursively, re-routing the batch as it goes.
+    fn refine(&mut self, samples: &[Sample], lists: &mut Vec<Vec<u32>>) {
+        let threshold = self.config.max_samples_per_leaf as f64;
+        let mut work = Vec::new();
+        for (r, list) in lists.iter().enumerate() {
+            if let Some(&first) = list.first() {
+                for &i in list {
+                    self.regions[r].spatial.add(samples[i as usize].position);
+                }
+                work.push((r, self.tree.lookup(samples[first as usize].position).1));
+            }
+        }
+        while let Some((r, node)) = work.pop() {
+            let region = &self.regions[r];
+            if region.spatial.count < threshold || region.depth >= self.config.max_depth {
+                continue;
+            }
+            let Some((axis, at)) = region.spatial.split_plane() else { continue };
+            let (lower, upper): (Vec<u32>, Vec<u32>) =
+                lists[r].iter().partition(|&&i| samples[i as usize].position[axis] < at);
+            // The batch decides how the history is shared between the halves.
+            let n = (lower.len() + upper.len()) as f64;
+            let f_lower = (lower.len() as f64 + 0.5) / (n + 1.0);
+            let mut hi = self.regions[r].clone();
+            let lo = &mut self.regions[r];
+            for (child, list, f) in [(&mut *lo, &lower, f_lower), (&mut hi, &upper, 1.0 - f_lower)]
+            {
+                child.em.scale(f);
+                child.split_merge.scale(f);
+                child.depth += 1;
+                child.neighbour_count = 0;
+                child.spatial = SpatialStats::default();
+                for &i in list {
+                    child.spatial.add(samples[i as usize].position);
+                }
+            }
+            let u = self.regions.len();
+            self.regions.push(hi);
+            lists[r] = lower;
+            lists.push(upper);
+            self.tree.split(node, axis, at, r as u32, u as u32);
+            let first_child = self.tree.node_count() - 2;
+            work.push((r, first_child));
+            work.push((u, first_child + 1));
+        }
+    }
+
+    /// Finds each region's nearest trained regions for the spatial filter (kiddo).
+    fn build_neighbours(&mut self) {
+        use kiddo::{ImmutableKdTree, SquaredEuclidean};
+        let trained: Vec<u32> = (0..self.regions.len() as u32)
+            .filter(|&i| self.regions[i as usize].is_trained())
+            .collect();
+        let points: Vec<[f32; 3]> =
+            trained.iter().map(|&i| self.regions[i as usize].centre.to_array()).collect();
+        let k = self.config.filter_neighbours.min(trained.len());
+        let Some(k_plus_self) = std::num::NonZeroUsize::new(k + 1) else { return };
+        let Ok(tree) = ImmutableKdTree::<f32, 3>::new_from_slice(&points) else { return };
+        for (r, region) in self.regions.iter_mut().enumerate() {
+            let found = tree
+                .query(&region.centre.to_array())
+                .nearest_n::<SquaredEuclidean<f32>>(k_plus_self)
+                .execute();
+            let mut n = 0;
+            for item in found {
+                let j = trained[item.item as usize];
+                if j as usize != r && n < k {
+                    region.neighbours[n] = j;
+                    n += 1;
+                }
+            }
+            region.neighbour_count = n as u8;
+        }
+    }
+
+    /// Counts and timings of the field.
+    pub fn stats(&self) -> FieldStats {
+        FieldStats::of(self)
+    }
+}
+
+#[cfg(test)]
+mod tests;

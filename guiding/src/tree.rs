@@ -1,0 +1,191 @@
+//! The adaptive spatial kd-tree that partitions space into regions.
+//!
+//! The root covers all of space, so every position has a leaf. A leaf splits once it has seen
+//! enough samples, on the axis where its samples spread most, at their mean: dense parts of the
+//! scene get small regions, sparse parts keep large ones. Nodes live in one vector, children
+//! side by side, so a lookup is a short loop over a few cache lines.
+
+use glam::{DVec3, Vec3};
+use serde::{Deserialize, Serialize};
+
+const LEAF: u8 = 3;
+
+/// One node: an inner node splits on `axis` at `split` and has children `child`, `child + 1`;
+/// a leaf (`axis == LEAF`) points at the region `child`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub(crate) struct Node {
+    split: f32,
+    axis: u8,
+    child: u32,
+}
+
+/// The tree of regions.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub(crate) struct KdTree {
+    nodes: Vec<Node>,
+}
+
+impl KdTree {
+    /// One leaf, for region 0, covering everything.
+    pub(crate) fn new() -> Self {
+        Self { nodes: vec![Node { split: 0.0, axis: LEAF, child: 0 }] }
+    }
+
+    /// The region containing `pos` and the index of its leaf node. Positions exactly on a
+    /// split plane go to the upper side.
+    #[inline]
+    pub(crate) fn lookup(&self, pos: Vec3) -> (usize, usize) {
+        let mut i = 0;
+        loop {
+            let n = self.nodes[i];
+            if n.axis == LEAF {
+                return (n.child as usize, i);
+            }
+            i = n.child as usize + usize::from(pos[n.axis as usize] >= n.split);
+        }
+    }
+
+    /// Turns leaf `node` into an inner node; its lower half keeps region `lower`, its upper
+    /// half gets region `upper`.
+    pub(crate) fn split(&mut self, node: usize, axis: usize, split: f32, lower: u32, upper: u32) {
+        debug_assert_eq!(self.nodes[node].axis, LEAF);
+        let child = self.nodes.len() as u32;
+        self.nodes.push(Node { split: 0.0, axis: LEAF, child: lower });
+        self.nodes.push(Node { split: 0.0, axis: LEAF, child: upper });
+        self.nodes[node] = Node { split, axis: axis as u8, child };
+    }
+
+    pub(crate) fn node_count(&self) -> usize {
+        self.nodes.len()
+    }
+
+    pub(crate) fn memory_bytes(&self) -> usize {
+        self.nodes.capacity() * std::mem::size_of::<Node>()
+    }
+
+    /// Depth of the deepest leaf (the root alone has depth 0).
+    pub(crate) fn depth(&self) -> u32 {
+        let mut stack = vec![(0usize, 0u32)];
+        let mut deepest = 0;
+        while let Some((i, d)) = stack.pop() {
+            let n = self.nodes[i];
+            if n.axis == LEAF {
+                deepest = deepest.max(d);
+            } else {
+                stack.push((n.child as usize, d + 1));
+                stack.push((n.child as usize + 1, d + 1));
+            }
+        }
+        deepest
+    }
+
+    /// Checks the structure: every node reachable exactly once, every region referenced by
+    /// exactly one leaf. Loading a field runs this, so corrupt data cannot make lookups panic.
+    pub(crate) fn validate(&self, regions: usize) -> Result<(), String> {
+        let mut seen = vec![false; regions];
+        let mut reached = vec![false; self.nodes.len()];
+        let mut stack = vec![0usize];
+        while let Some(i) = stack.pop() {
+            let n = *self.nodes.get(i).ok_or_else(|| format!("node {i} does not exist"))?;
+            if std::mem::replace(&mut reached[i], true) {
+                return Err(format!("node {i} is reached twice"));
+            }
+            if n.axis == LEAF {
+                let r = n.child as usize;
+                if r >= regions || std::mem::replace(&mut seen[r], true) {
+                    return Err(format!("leaf {i} refers to region {r} badly"));
+                }
+            } else if n.axis < 3 && n.split.is_finite() {
+                stack.push(n.child as usize);
+                stack.push(n.child as usize + 1);
+            } else {
+                return Err(format!("node {i} has axis {} and split {}", n.axis, n.split));
+            }
+        }
+        if !reached.iter().all(|&r| r) || !seen.iter().all(|&s| s) {
+            return Err("unreachable nodes or regions without a leaf".into());
+        }
+        Ok(())
+    }
+}
+
+/// Running first and second moments of the positions a leaf has seen since it was created.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub(crate) struct SpatialStats {
+    pub(crate) count: f64,
+    sum: DVec3,
+    sum_sq: DVec3,
+}
+
+impl SpatialStats {
+    pub(crate) fn add(&mut self, p: Vec3) {
+        let p = p.as_dvec3();
+        self.count += 1.0;
+        self.sum += p;
+        self.sum_sq += p * p;
+    }
+
+    pub(crate) fn mean(&self) -> DVec3 {
+        if self.count > 0.0 { self.sum / self.count } else { DVec3::ZERO }
+    }
+
+    pub(crate) fn variance(&self) -> DVec3 {
+        if self.count < 2.0 {
+            return DVec3::ZERO;
+        }
+        let m = self.mean();
+        (self.sum_sq / self.count - m * m).max(DVec3::ZERO)
+    }
+
+    /// The axis of largest variance and the mean along it, if the samples spread at all.
+    pub(crate) fn split_plane(&self) -> Option<(usize, f32)> {
+        let v = self.variance();
+        let axis = if v.x >= v.y && v.x >= v.z {
+            0
+        } else if v.y >= v.z {
+            1
+        } else {
+            2
+        };
+        let m = self.mean()[axis];
+        // Variance below float resolution at this coordinate means the points coincide.
+        let resolution = (m.abs() * 1e-6).max(1e-12);
+        (v[axis].sqrt() > resolution).then_some((axis, m as f32))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn lookup_follows_splits() {
+        let mut t = KdTree::new();
+        assert_eq!(t.lookup(Vec3::splat(5.0)).0, 0);
+        t.split(0, 0, 1.0, 0, 1);
+        assert_eq!(t.lookup(Vec3::new(0.5, 0.0, 0.0)).0, 0);
+        assert_eq!(t.lookup(Vec3::new(1.0, 0.0, 0.0)).0, 1);
+        let (_, leaf) = t.lookup(Vec3::new(3.0, 0.0, 0.0));
+        t.split(leaf, 2, -1.0, 1, 2);
+        assert_eq!(t.lookup(Vec3::new(3.0, 0.0, -2.0)).0, 1);
+        assert_eq!(t.lookup(Vec3::new(3.0, 0.0, 0.0)).0, 2);
+        assert_eq!(t.depth(), 2);
+        t.validate(3).unwrap();
+        assert!(t.validate(4).is_err());
+    }
+
+    #[test]
+    fn split_plane_is_axis_of_largest_variance_at_mean() {
+        let mut s = SpatialStats::default();
+        for i in 0..100 {
+            let x = i as f32 * 0.01;
+            s.add(Vec3::new(x, 5.0 + 3.0 * x, 1.0));
+        }
+        let (axis, at) = s.split_plane().unwrap();
+        assert_eq!(axis, 1);
+        assert!((at - (5.0 + 3.0 * 0.495)).abs() < 1e-4);
+        let mut same = SpatialStats::default();
+        (0..10).for_each(|_| same.add(Vec3::new(1e3, 2.0, 3.0)));
+        assert!(same.split_plane().is_none());
+    }
+}
