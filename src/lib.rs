@@ -7,9 +7,11 @@
 //! tiles, accumulates a `film` and writes images (`output`).
 //!
 //! ```no_run
+//! use zerovar::guided::Components;
 //! use zerovar::render::{Budget, RenderOptions, render};
 //! let scene = zerovar::scene::load("scenes/fog-sphere.toml".as_ref(), &[]).unwrap();
-//! let options = RenderOptions { budget: Budget::Samples(16), seed: 0, threads: None };
+//! let mut options = RenderOptions::unguided(Budget::Samples(16), 0);
+//! options.guiding.components = Components::FULL; // train a field, then render with it
 //! let result = render(&scene, &options, &|_, _| {}).unwrap();
 //! println!("mean pixel {:?}", result.film.average());
 //! ```
@@ -19,6 +21,7 @@ pub mod bsdf;
 pub mod camera;
 pub mod distribution;
 pub mod film;
+pub mod guided;
 pub mod integrators;
 pub mod lights;
 pub mod math;

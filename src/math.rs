@@ -130,6 +130,13 @@ impl Aabb {
     }
 }
 
+/// Whether `x` is a positive number (false for zero, negatives and NaN): the guard before
+/// dividing by a density.
+#[inline]
+pub fn positive(x: f32) -> bool {
+    x > 0.0
+}
+
 /// A right-handed orthonormal basis whose `z` axis is a given unit vector.
 #[derive(Clone, Copy, Debug)]
 pub struct Frame {

@@ -1,19 +1,23 @@
-//! The render session: samples the image over 16x16 tiles in parallel (rayon) until a sample
-//! or time budget is spent.
+//! The render session: trains a guiding field when guiding is on, then samples the image over
+//! 16x16 tiles in parallel (rayon) until a sample or time budget is spent.
 //!
-//! Each pixel sample draws from its own stream keyed by (seed, pixel, sample index), and each
-//! pixel's samples are summed in index order, so an image depends on the seed and the sample
-//! count only, never on the thread count or the tile schedule.
+//! Each pixel sample draws from its own stream keyed by (seed, pixel, sample index), each
+//! pixel's samples are summed in index order, and training samples are gathered in tile order
+//! (the field's update is deterministic), so an image depends on the seed and the budgets
+//! only, never on the thread count or the tile schedule.
 
 use crate::film::{Film, PixelSum};
+use crate::guided::{Components, FieldCache, NoCache, RadianceCache};
 use crate::integrators::VolPath;
-use crate::math::is_finite;
-use crate::rng::Sampler;
+use crate::integrators::walk::{self, WalkContext, WalkSettings};
+use crate::math::{Spectrum, is_finite, luminance};
+use crate::rng::{Sampler, mix64};
 use crate::scene::Scene;
 use crate::stats::Counters;
 use glam::Vec2;
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
+use zerovar_guiding::{Field, FieldConfig, FieldStats, GuidingError, PathRecorder, Sample};
 
 const TILE: u32 = 16;
 
@@ -26,33 +30,99 @@ pub enum Budget {
     Time(Duration),
 }
 
+/// How much to train.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum TrainBudget {
+    /// Passes of 1, 2, 4, ... samples per pixel (Mueller et al. 2017), the field updated
+    /// after each.
+    Passes(u32),
+    /// Doubling passes until this much time is spent (at least one pass).
+    Time(Duration),
+}
+
+/// Guiding settings of a render.
+#[derive(Clone, Debug)]
+pub struct GuidingOptions {
+    /// Which decisions are guided; nothing guided means no training.
+    pub components: Components,
+    /// Probability of the guided strategy in every mixture, in [0, 1].
+    pub alpha: f32,
+    /// Training budget.
+    pub train: TrainBudget,
+    /// Settings of a new field.
+    pub field: FieldConfig,
+    /// Combine the training passes' images with the render's by inverse variance, rather than
+    /// discarding them.
+    pub combine_training: bool,
+}
+
+impl Default for GuidingOptions {
+    fn default() -> Self {
+        Self {
+            components: Components::OFF,
+            alpha: 0.5,
+            train: TrainBudget::Passes(5),
+            field: FieldConfig::default(),
+            combine_training: false,
+        }
+    }
+}
+
 /// Validated settings of one render.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Debug)]
 pub struct RenderOptions {
-    /// The budget.
+    /// The budget of the final (render) phase.
     pub budget: Budget,
     /// Seed of the random streams.
     pub seed: u64,
     /// Worker threads (`None`: all cores).
     pub threads: Option<usize>,
+    /// Guiding.
+    pub guiding: GuidingOptions,
+}
+
+impl RenderOptions {
+    /// Unguided rendering with `budget` and `seed` on all cores.
+    pub fn unguided(budget: Budget, seed: u64) -> Self {
+        Self { budget, seed, threads: None, guiding: GuidingOptions::default() }
+    }
+}
+
+/// What training produced.
+#[derive(Clone, Debug)]
+pub struct TrainingReport {
+    /// Passes run.
+    pub passes: u32,
+    /// Samples per pixel over all passes.
+    pub spp: u32,
+    /// Seconds spent training (rendering and updating).
+    pub seconds: f64,
+    /// Training samples the field learned from.
+    pub samples: u64,
+    /// The field after training.
+    pub field: FieldStats,
 }
 
 /// A finished render.
 #[derive(Clone, Debug)]
 pub struct RenderResult {
-    /// The accumulated image.
+    /// The accumulated image of the render phase.
     pub film: Film,
-    /// Samples per pixel rendered.
+    /// The image to write: the film's, or combined with the training images.
+    pub image: Vec<[f32; 3]>,
+    /// Samples per pixel of the render phase.
     pub spp: u32,
-    /// Seconds spent sampling.
+    /// Seconds of the render phase.
     pub seconds: f64,
-    /// Event counters.
+    /// Event counters of the render phase.
     pub counters: Counters,
     /// Threads used.
     pub threads: usize,
+    /// Training, when guiding was on and no field was given.
+    pub training: Option<TrainingReport>,
 }
 
-/// Why a render could not start.
+/// Why a render could not run.
 #[derive(Debug, thiserror::Error)]
 pub enum RenderError {
     /// The thread pool could not be built.
@@ -63,15 +133,70 @@ pub enum RenderError {
         /// The system's reason.
         message: String,
     },
+    /// The guiding field rejected its settings or its training samples.
+    #[error("guiding: {0}")]
+    Guiding(#[from] GuidingError),
 }
 
-/// Renders `scene`. `progress(done, total)` is called as work completes (in samples for a
-/// sample budget, in milliseconds for a time budget).
+/// Renders `scene`, training a field first when guiding is on. `progress(done, total)` is
+/// called as work completes (samples for a sample budget, milliseconds for a time budget).
 pub fn render(
     scene: &Scene,
     options: &RenderOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<RenderResult, RenderError> {
+    in_pool(options, |threads| {
+        if !options.guiding.components.any() {
+            return Ok(final_phase(
+                scene,
+                options,
+                None,
+                None,
+                Vec::new(),
+                threads,
+                progress,
+                None,
+            ));
+        }
+        let (field, films, report) = train_in_pool(scene, options, progress)?;
+        Ok(final_phase(
+            scene,
+            options,
+            Some(&field),
+            Some(&films),
+            films.clone(),
+            threads,
+            progress,
+            Some(report),
+        ))
+    })
+}
+
+/// Renders `scene` guided by a field trained earlier (no training phase).
+pub fn render_with_field(
+    scene: &Scene,
+    options: &RenderOptions,
+    field: &Field,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<RenderResult, RenderError> {
+    in_pool(options, |threads| {
+        Ok(final_phase(scene, options, Some(field), None, Vec::new(), threads, progress, None))
+    })
+}
+
+/// Trains a field on `scene` with the training budget of `options`.
+pub fn train(
+    scene: &Scene,
+    options: &RenderOptions,
+    progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<(Field, TrainingReport), RenderError> {
+    in_pool(options, |_| train_in_pool(scene, options, progress).map(|(f, _, r)| (f, r)))
+}
+
+fn in_pool<T: Send>(
+    options: &RenderOptions,
+    work: impl FnOnce(usize) -> Result<T, RenderError> + Send,
+) -> Result<T, RenderError> {
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(t) = options.threads {
         builder = builder.num_threads(t);
@@ -81,28 +206,151 @@ pub fn render(
         message: e.to_string(),
     })?;
     let threads = pool.current_num_threads();
-    Ok(pool.install(|| render_in_pool(scene, options, progress, threads)))
+    pool.install(|| work(threads))
 }
 
-fn render_in_pool(
+fn walk_settings(scene: &Scene, options: &RenderOptions) -> WalkSettings {
+    WalkSettings {
+        guide: options.guiding.components,
+        alpha: options.guiding.alpha,
+        ..VolPath::from_scene(scene).settings()
+    }
+}
+
+/// Training passes: 1, 2, 4, ... spp, each guided by the field so far, the field updated with
+/// its samples after each. Returns the field, the passes' films and a report.
+fn train_in_pool(
     scene: &Scene,
     options: &RenderOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
+) -> Result<(Field, Vec<Film>, TrainingReport), RenderError> {
+    let start = Instant::now();
+    let mut field = Field::new(options.guiding.field.clone())?;
+    let settings = walk_settings(scene, options);
+    let [w, h] = scene.camera.resolution;
+    let mut films = Vec::new();
+    let (mut spp, mut samples_total) = (0u32, 0u64);
+    let (passes, limit) = match options.guiding.train {
+        TrainBudget::Passes(n) => (n, None),
+        TrainBudget::Time(t) => (u32::MAX, Some(t)),
+    };
+    let total = match options.guiding.train {
+        TrainBudget::Passes(n) => ((1u64 << n.min(30)) - 1) * (w * h) as u64,
+        TrainBudget::Time(t) => t.as_millis() as u64,
+    };
+    for pass in 0..passes.min(20) {
+        let count = 1u32 << pass;
+        let mut film = Film::new(w, h);
+        let estimate = pixel_estimates(&films);
+        // Each pass draws from its own streams, independent of the render phase's.
+        let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
+        let pass_start = Instant::now();
+        let (_, samples) = render_pass(
+            scene,
+            &settings,
+            seed,
+            0,
+            count,
+            &mut film,
+            Some(&field),
+            estimate.as_deref(),
+            true,
+            &|_| {},
+        );
+        field.update(&samples)?;
+        samples_total += samples.len() as u64;
+        spp += count;
+        films.push(film);
+        match limit {
+            None => progress(((1u64 << (pass + 1)) - 1) * (w * h) as u64, total),
+            Some(t) => {
+                progress((start.elapsed().as_millis() as u64).min(total), total);
+                // Stop when the next pass (twice as long) would overrun the budget.
+                if start.elapsed() + pass_start.elapsed() * 2 > t {
+                    break;
+                }
+            }
+        }
+    }
+    let report = TrainingReport {
+        passes: films.len() as u32,
+        spp,
+        seconds: start.elapsed().as_secs_f64(),
+        samples: samples_total,
+        field: field.stats(),
+    };
+    Ok((field, films, report))
+}
+
+/// Per-pixel luminance estimates from the training films: the mean over all their samples,
+/// box-filtered over 5x5 pixels, since a weight window centred on a noisy estimate (a
+/// firefly, or a pixel whose few samples missed the light) would roulette or split the
+/// wrong paths.
+fn pixel_estimates(films: &[Film]) -> Option<Vec<f32>> {
+    let first = films.first()?;
+    let (w, h) = (first.width as usize, first.height as usize);
+    let mut sums = vec![PixelSum::default(); first.pixels.len()];
+    for f in films {
+        for (s, p) in sums.iter_mut().zip(&f.pixels) {
+            s.merge(p);
+        }
+    }
+    let raw: Vec<f32> = sums.iter().map(|s| luminance(Spectrum::from_array(s.mean()))).collect();
+    let mut out = vec![0.0; raw.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let (y0, y1) = (y.saturating_sub(2), (y + 3).min(h));
+            let (x0, x1) = (x.saturating_sub(2), (x + 3).min(w));
+            let total: f32 = (y0..y1).flat_map(|yy| raw[yy * w + x0..yy * w + x1].iter()).sum();
+            out[y * w + x] = total / ((y1 - y0) * (x1 - x0)) as f32;
+        }
+    }
+    Some(out)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn final_phase(
+    scene: &Scene,
+    options: &RenderOptions,
+    field: Option<&Field>,
+    training: Option<&[Film]>,
+    training_films: Vec<Film>,
     threads: usize,
+    progress: &(dyn Fn(u64, u64) + Sync),
+    report: Option<TrainingReport>,
 ) -> RenderResult {
+    let settings = if field.is_some() {
+        walk_settings(scene, options)
+    } else {
+        VolPath::from_scene(scene).settings()
+    };
+    let estimate = training.and_then(pixel_estimates);
     let [w, h] = scene.camera.resolution;
     let mut film = Film::new(w, h);
     let mut counters = Counters::default();
     let start = Instant::now();
     let mut done = 0u32;
+    let est = estimate.as_deref();
     match options.budget {
         Budget::Samples(spp) => {
             let total = spp as u64 * w as u64 * h as u64;
             let finished = std::sync::atomic::AtomicU64::new(0);
-            counters += render_pass(scene, options.seed, 0, spp, &mut film, &|n| {
-                let d = finished.fetch_add(n, std::sync::atomic::Ordering::Relaxed) + n;
-                progress(d, total);
-            });
+            let (c, _) = render_pass(
+                scene,
+                &settings,
+                options.seed,
+                0,
+                spp,
+                &mut film,
+                field,
+                est,
+                false,
+                &|n| {
+                    let d = finished.fetch_add(n, std::sync::atomic::Ordering::Relaxed) + n;
+                    progress(d, total);
+                },
+            );
+            counters += c;
             done = spp;
         }
         Budget::Time(limit) => {
@@ -110,7 +358,19 @@ fn render_in_pool(
             let mut batch = 1u32;
             loop {
                 let pass_start = Instant::now();
-                counters += render_pass(scene, options.seed, done, batch, &mut film, &|_| {});
+                let (c, _) = render_pass(
+                    scene,
+                    &settings,
+                    options.seed,
+                    done,
+                    batch,
+                    &mut film,
+                    field,
+                    est,
+                    false,
+                    &|_| {},
+                );
+                counters += c;
                 done += batch;
                 let elapsed = start.elapsed();
                 progress((elapsed.as_millis() as u64).min(total), total);
@@ -124,62 +384,117 @@ fn render_in_pool(
             }
         }
     }
-    RenderResult { film, spp: done, seconds: start.elapsed().as_secs_f64(), counters, threads }
+    let image = if options.guiding.combine_training && !training_films.is_empty() {
+        combine_by_inverse_variance(&training_films, &film)
+    } else {
+        film.image()
+    };
+    RenderResult {
+        film,
+        image,
+        spp: done,
+        seconds: start.elapsed().as_secs_f64(),
+        counters,
+        threads,
+        training: report,
+    }
 }
 
-/// Adds samples `first .. first + count` of every pixel to `film`.
+/// Mean per-pixel variance of a film's pixel means (luminance), the weight's inverse.
+fn image_variance(film: &Film) -> f64 {
+    let mut acc = 0.0;
+    for p in &film.pixels {
+        let n = p.count.max(1) as f64;
+        let mean = luminance(Spectrum::from_array(p.mean())) as f64;
+        acc += ((p.lum_sq / n - mean * mean).max(0.0)) / n;
+    }
+    acc / film.pixels.len().max(1) as f64
+}
+
+/// The images of `training` and `last` averaged with weights inversely proportional to their
+/// estimated variance (equal weights if a variance is zero).
+fn combine_by_inverse_variance(training: &[Film], last: &Film) -> Vec<[f32; 3]> {
+    let films: Vec<&Film> = training.iter().chain(std::iter::once(last)).collect();
+    let weights: Vec<f64> = films
+        .iter()
+        .map(|f| image_variance(f))
+        .map(|v| if v > 0.0 && v.is_finite() { 1.0 / v } else { 0.0 })
+        .collect();
+    let total: f64 = weights.iter().sum();
+    let weights: Vec<f64> = if total > 0.0 {
+        weights.iter().map(|w| w / total).collect()
+    } else {
+        vec![1.0 / films.len() as f64; films.len()]
+    };
+    (0..last.pixels.len())
+        .map(|i| {
+            let mut c = [0.0f64; 3];
+            for (f, w) in films.iter().zip(&weights) {
+                let m = f.pixels[i].mean();
+                for k in 0..3 {
+                    c[k] += w * m[k] as f64;
+                }
+            }
+            c.map(|v| v as f32)
+        })
+        .collect()
+}
+
+/// Adds samples `first .. first + count` of every pixel to `film`; returns the counters and,
+/// when `record`, the training samples in tile order.
+#[allow(clippy::too_many_arguments)]
 fn render_pass(
     scene: &Scene,
+    settings: &WalkSettings,
     seed: u64,
     first: u32,
     count: u32,
     film: &mut Film,
+    field: Option<&Field>,
+    estimate: Option<&[f32]>,
+    record: bool,
     on_tile: &(dyn Fn(u64) + Sync),
-) -> Counters {
+) -> (Counters, Vec<Sample>) {
     let [w, h] = scene.camera.resolution;
     let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE))
         .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty)))
         .collect();
-    let integrator = VolPath::from_scene(scene);
-    let results: Vec<(Vec<PixelSum>, Counters)> = tiles
+    let results: Vec<(Vec<PixelSum>, Counters, Vec<Sample>)> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
-            let mut counters = Counters::default();
-            let (x0, y0) = (tx * TILE, ty * TILE);
-            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-            let mut sums = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-            for y in y0..y1 {
-                for x in x0..x1 {
-                    let pixel = (y as u64) * w as u64 + x as u64;
-                    let mut sum = PixelSum::default();
-                    for s in first..first + count {
-                        let mut sampler = Sampler::new(seed, pixel, s as u64);
-                        let jitter = sampler.next_2d();
-                        let ray = scene.camera.ray(Vec2::new(x as f32, y as f32) + jitter);
-                        let l = integrator.radiance(
-                            scene,
-                            ray,
-                            scene.camera_medium,
-                            &mut sampler,
-                            &mut counters,
-                        );
-                        if is_finite(l) {
-                            sum.add(l);
-                        } else {
-                            counters.invalid_samples += 1;
-                            sum.add(crate::math::Spectrum::ZERO);
-                        }
-                    }
-                    sums.push(sum);
-                }
-            }
-            on_tile(sums.len() as u64 * count as u64);
-            (sums, counters)
+            let out = match field {
+                Some(f) => render_tile(
+                    scene,
+                    settings,
+                    seed,
+                    (tx, ty),
+                    first,
+                    count,
+                    &mut FieldCache::new(f),
+                    estimate,
+                    record,
+                ),
+                None => render_tile(
+                    scene,
+                    settings,
+                    seed,
+                    (tx, ty),
+                    first,
+                    count,
+                    &mut NoCache,
+                    estimate,
+                    record,
+                ),
+            };
+            on_tile(out.0.len() as u64 * count as u64);
+            out
         })
         .collect();
     let mut counters = Counters::default();
-    for (&(tx, ty), (sums, c)) in tiles.iter().zip(results) {
+    let mut samples = Vec::new();
+    for (&(tx, ty), (sums, c, s)) in tiles.iter().zip(results) {
         counters += c;
+        samples.extend(s);
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = (x0 + TILE).min(w) - x0;
         for (i, s) in sums.iter().enumerate() {
@@ -187,5 +502,63 @@ fn render_pass(
             film.pixels[(y * w + x) as usize].merge(s);
         }
     }
-    counters
+    (counters, samples)
+}
+
+#[allow(clippy::too_many_arguments)]
+fn render_tile<C: RadianceCache>(
+    scene: &Scene,
+    settings: &WalkSettings,
+    seed: u64,
+    (tx, ty): (u32, u32),
+    first: u32,
+    count: u32,
+    cache: &mut C,
+    estimate: Option<&[f32]>,
+    record: bool,
+) -> (Vec<PixelSum>, Counters, Vec<Sample>) {
+    let [w, h] = scene.camera.resolution;
+    let mut counters = Counters::default();
+    let mut recorder = PathRecorder::new();
+    let mut samples = Vec::new();
+    let (x0, y0) = (tx * TILE, ty * TILE);
+    let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+    let mut sums = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
+    for y in y0..y1 {
+        for x in x0..x1 {
+            let pixel = (y as u64) * w as u64 + x as u64;
+            let mut sum = PixelSum::default();
+            for s in first..first + count {
+                let mut sampler = Sampler::new(seed, pixel, s as u64);
+                let jitter = sampler.next_2d();
+                let ray = scene.camera.ray(Vec2::new(x as f32, y as f32) + jitter);
+                let mut ctx = WalkContext {
+                    cache: &mut *cache,
+                    pixel: estimate.map(|e| e[pixel as usize]),
+                    recorder: if record { Some(&mut recorder) } else { None },
+                };
+                let l = walk::radiance(
+                    settings,
+                    scene,
+                    ray,
+                    scene.camera_medium,
+                    &mut ctx,
+                    &mut sampler,
+                    &mut counters,
+                );
+                if is_finite(l) {
+                    sum.add(l);
+                    if record {
+                        recorder.finish(&mut samples);
+                    }
+                } else {
+                    counters.invalid_samples += 1;
+                    sum.add(Spectrum::ZERO);
+                    recorder.clear();
+                }
+            }
+            sums.push(sum);
+        }
+    }
+    (sums, counters, samples)
 }

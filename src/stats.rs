@@ -7,6 +7,8 @@ use serde::Serialize;
 pub struct Counters {
     /// Camera paths traced.
     pub paths: u64,
+    /// Walks traced: camera paths plus the copies made by splitting.
+    pub walks: u64,
     /// Path segments traced (camera ray and every continuation).
     pub segments: u64,
     /// Real scattering events in media.
@@ -22,6 +24,7 @@ pub struct Counters {
 impl std::ops::AddAssign for Counters {
     fn add_assign(&mut self, o: Self) {
         self.paths += o.paths;
+        self.walks += o.walks;
         self.segments += o.segments;
         self.medium_scatters += o.medium_scatters;
         self.surface_scatters += o.surface_scatters;
@@ -55,6 +58,30 @@ pub struct RenderStats {
     pub density_lookups_per_path: f64,
     /// Samples dropped as NaN or infinite (zero unless something is wrong).
     pub invalid_samples: u64,
+    /// Walks per camera path: 1 without splitting.
+    pub splitting_factor: f64,
+    /// Guiding: training, when a field was trained.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub training: Option<TrainingStats>,
+}
+
+/// The training part of `--stats`.
+#[derive(Clone, Debug, Serialize)]
+pub struct TrainingStats {
+    /// Training passes.
+    pub passes: u32,
+    /// Samples per pixel over all training passes.
+    pub spp: u32,
+    /// Seconds of training, field updates included.
+    pub seconds: f64,
+    /// Training samples learned from.
+    pub samples: u64,
+    /// Regions of the field.
+    pub regions: usize,
+    /// vMF lobes over all regions.
+    pub lobes: usize,
+    /// Memory of the field in bytes.
+    pub memory_bytes: usize,
 }
 
 impl RenderStats {
@@ -73,6 +100,8 @@ impl RenderStats {
             scatter_events_per_path: per_path(c.medium_scatters + c.surface_scatters),
             density_lookups_per_path: per_path(c.density_lookups),
             invalid_samples: c.invalid_samples,
+            splitting_factor: if c.paths > 0 { c.walks as f64 / c.paths as f64 } else { 1.0 },
+            training: None,
         }
     }
 }

@@ -187,3 +187,56 @@ fn bad_arguments_fail_clearly() {
         );
     }
 }
+
+#[test]
+fn trains_a_field_and_renders_with_it() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let scene = write("train.toml", GOOD);
+    let dir = temp_dir();
+    let field = dir.join("train.zvg");
+    let s = scene.to_str().unwrap();
+    let o = zerovar(&["train", s, "-o", field.to_str().unwrap(), "--train-passes", "3", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(field.is_file());
+    let exr = dir.join("train.exr");
+    let stats = dir.join("train.json");
+    let (e, f, st) = (exr.to_str().unwrap(), field.to_str().unwrap(), stats.to_str().unwrap());
+    let o = zerovar(&["render", s, "-o", e, "--spp", "2", "--field", f, "--stats", st, "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = zerovar(&[
+        "render",
+        s,
+        "-o",
+        e,
+        "--spp",
+        "2",
+        "--guiding",
+        "full",
+        "--train-passes",
+        "2",
+        "--stats",
+        st,
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["training"]["passes"], 2);
+    assert!(json["training"]["regions"].as_u64().unwrap() >= 1);
+    // A file that is not a field, and bad guiding arguments, fail clearly.
+    let bogus = write("bogus.zvg", b"not a field");
+    let o = zerovar(&["render", s, "-o", e, "--field", bogus.to_str().unwrap(), "--quiet"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("bogus.zvg") && !stderr(&o).contains("panicked"),
+        "{}",
+        stderr(&o)
+    );
+    for (args, needle) in [
+        (vec!["--guiding", "sideways"], "--guiding sideways"),
+        (vec!["--guiding", "full", "--alpha", "1.5"], "--alpha 1.5"),
+        (vec!["--guiding", "full", "--train-passes", "0"], "--train-passes 0"),
+    ] {
+        let o = zerovar(&[&["render", s, "-o", e, "--quiet"][..], &args].concat());
+        assert!(!o.status.success() && stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
+    }
+}

@@ -2,7 +2,8 @@
 //! every example scene loading.
 
 use crate::common::{repo, scene};
-use zerovar::render::{Budget, RenderOptions, render};
+use zerovar::guided::Components;
+use zerovar::render::{Budget, RenderOptions, TrainBudget, render};
 
 const SMALL: &str = r#"
 [camera]
@@ -51,16 +52,24 @@ angular_diameter = 2
 #[test]
 fn image_does_not_depend_on_thread_count() {
     let s = scene(SMALL);
-    let run = |threads| {
-        let o = RenderOptions { budget: Budget::Samples(4), seed: 9, threads: Some(threads) };
+    let run = |threads, guiding: Components| {
+        let mut o = RenderOptions {
+            threads: Some(threads),
+            ..RenderOptions::unguided(Budget::Samples(4), 9)
+        };
+        o.guiding.components = guiding;
+        o.guiding.train = TrainBudget::Passes(3);
         render(&s, &o, &|_, _| {}).unwrap()
     };
-    let (a, b) = (run(1), run(2));
-    assert_eq!(a.film.pixels, b.film.pixels, "1 and 2 threads differ");
-    assert_eq!(a.counters, b.counters);
+    for guiding in [Components::OFF, Components::FULL] {
+        let (a, b) = (run(1, guiding), run(2, guiding));
+        assert_eq!(a.film.pixels, b.film.pixels, "1 and 2 threads differ ({guiding:?})");
+        assert_eq!(a.counters, b.counters);
+    }
+    let a = run(1, Components::OFF);
     let c = render(
         &s,
-        &RenderOptions { budget: Budget::Samples(4), seed: 10, threads: Some(2) },
+        &RenderOptions { threads: Some(2), ..RenderOptions::unguided(Budget::Samples(4), 10) },
         &|_, _| {},
     )
     .unwrap();
@@ -135,11 +144,19 @@ position = [0, 0.0001, 0]
 intensity = 1
 "#;
     let s = scene(&text.replace("\n[camera]", "medium = \"thin\"\n\n[camera]"));
-    let o = RenderOptions { budget: Budget::Samples(8), seed: 1, threads: None };
-    let r = render(&s, &o, &|_, _| {}).unwrap();
-    assert_eq!(r.counters.invalid_samples, 0, "NaN or Inf samples: {:?}", r.counters);
-    assert!(r.film.image().iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
-    assert!(r.film.average().iter().any(|v| *v > 0.0), "the hard case rendered black");
+    for guiding in [Components::OFF, Components::FULL] {
+        let mut o = RenderOptions::unguided(Budget::Samples(8), 1);
+        o.guiding.components = guiding;
+        o.guiding.train = TrainBudget::Passes(3);
+        let r = render(&s, &o, &|_, _| {}).unwrap();
+        assert_eq!(
+            r.counters.invalid_samples, 0,
+            "NaN or Inf samples ({guiding:?}): {:?}",
+            r.counters
+        );
+        assert!(r.image.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
+        assert!(r.film.average().iter().any(|v| *v > 0.0), "the hard case rendered black");
+    }
 }
 
 #[test]

@@ -3,6 +3,8 @@
 mod cli;
 mod common;
 mod furnace;
+mod guided;
 mod render;
 mod single_scatter;
+mod tracking;
 mod transmittance;

@@ -6,9 +6,13 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+use zerovar::guided::Components;
 use zerovar::output::{ImageMetadata, write_exr, write_png};
-use zerovar::render::{Budget, RenderOptions, render};
-use zerovar::stats::RenderStats;
+use zerovar::render::{
+    Budget, GuidingOptions, RenderOptions, TrainBudget, render, render_with_field,
+};
+use zerovar::stats::{RenderStats, TrainingStats};
+use zerovar_guiding::Field;
 
 #[derive(Parser)]
 #[command(
@@ -27,6 +31,46 @@ enum CommandArgs {
     Render(RenderArgs),
     /// Load and validate a scene and print what it holds.
     Check(CheckArgs),
+    /// Train a guiding field on a scene and save it, for `render --field`.
+    Train(TrainArgs),
+}
+
+#[derive(Args)]
+struct GuidingArgs {
+    /// Guided decisions: off, directions, distances, rr, full, or a +-joined list
+    /// (e.g. directions+rr).
+    #[arg(long, default_value = "off", value_name = "MODE")]
+    guiding: String,
+    /// Probability of the guided strategy in each mixture with standard sampling, in [0, 1]
+    /// (used up to 0.8: standard sampling always keeps 20%, which bounds every weight).
+    #[arg(long, default_value_t = 0.5)]
+    alpha: f32,
+    /// Training passes of 1, 2, 4, ... samples per pixel before rendering.
+    #[arg(long, default_value_t = 5, conflicts_with = "train_time")]
+    train_passes: u32,
+    /// Train for this many seconds (doubling passes) instead of a fixed number of passes.
+    #[arg(long, allow_negative_numbers = true)]
+    train_time: Option<f64>,
+}
+
+#[derive(Args)]
+struct TrainArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Where to save the field.
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    guiding: GuidingArgs,
+    /// Seed of the random streams [default: the scene's render.seed].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar.
+    #[arg(short, long)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -36,6 +80,12 @@ struct SceneArgs {
     /// Override a value of the scene's [defaults] table (repeatable).
     #[arg(short = 'D', value_name = "KEY=VALUE")]
     define: Vec<String>,
+    /// Free-flight tracker: auto (per medium: closed form if homogeneous, decomposition for
+    /// grids, spectral only if chromatic) or one for every medium: analytic, analytic-spectral,
+    /// regular, delta, weighted-delta, decomposition, weighted-decomposition, spectral,
+    /// spectral-max, spectral-average, spectral-decomposition, ray-marching-biased (BIASED).
+    #[arg(long, default_value = "auto", value_name = "TRACKER")]
+    tracker: zerovar::tracking::TrackerChoice,
 }
 
 #[derive(Args)]
@@ -72,6 +122,14 @@ struct RenderArgs {
     /// No progress bar.
     #[arg(short, long)]
     quiet: bool,
+    #[command(flatten)]
+    guiding: GuidingArgs,
+    /// Render guided by a field saved by `zerovar train` (no training phase).
+    #[arg(long, value_name = "FIELD")]
+    field: Option<PathBuf>,
+    /// Average the training passes' images into the result by inverse variance.
+    #[arg(long)]
+    combine_training: bool,
 }
 
 /// A fully validated render request.
@@ -87,18 +145,84 @@ struct RenderCommand {
     stats: Option<PathBuf>,
     exposure: f32,
     progress: bool,
+    tracker: zerovar::tracking::TrackerChoice,
+    guiding: GuidingOptions,
+    field: Option<PathBuf>,
 }
 
 pub(crate) fn run() -> Result<()> {
     match Cli::parse().command {
         CommandArgs::Check(a) => {
             let defines = parse_defines(&a.scene.define)?;
-            let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+            let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+            scene.set_tracker(a.scene.tracker)?;
             print!("{}", scene.describe());
             Ok(())
         }
         CommandArgs::Render(a) => run_render(validate(a)?),
+        CommandArgs::Train(a) => run_train(a),
     }
+}
+
+/// Validates guiding arguments; `default_full` makes `off` mean everything (for `train`).
+fn validate_guiding(a: &GuidingArgs, default_full: bool) -> Result<GuidingOptions> {
+    let Some(mut components) = Components::parse(&a.guiding) else {
+        bail!(
+            "--guiding {}: use off, directions, distances, rr, full, or a +-joined list",
+            a.guiding
+        );
+    };
+    if default_full && !components.any() {
+        components = Components::FULL;
+    }
+    if !(0.0..=1.0).contains(&a.alpha) {
+        bail!("--alpha {}: give a probability in [0, 1]", a.alpha);
+    }
+    let train = match a.train_time {
+        Some(t) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
+            bail!("--train-time {t}: give a positive number of seconds")
+        }
+        Some(t) => TrainBudget::Time(Duration::from_secs_f64(t)),
+        None if a.train_passes == 0 || a.train_passes > 20 => {
+            bail!("--train-passes {}: give 1 to 20 passes (pass k renders 2^k spp)", a.train_passes)
+        }
+        None => TrainBudget::Passes(a.train_passes),
+    };
+    Ok(GuidingOptions { components, alpha: a.alpha, train, ..GuidingOptions::default() })
+}
+
+fn run_train(a: TrainArgs) -> Result<()> {
+    let guiding = validate_guiding(&a.guiding, true)?;
+    if a.threads == Some(0) {
+        bail!("--threads 0: give at least one thread, or leave it out to use every core");
+    }
+    let defines = parse_defines(&a.scene.define)?;
+    let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+    let file = std::fs::File::create(&a.output)
+        .with_context(|| format!("{}: cannot create the field file", a.output.display()))?;
+    let seed = a.seed.unwrap_or(scene.settings.seed);
+    let options = RenderOptions { budget: Budget::Samples(1), seed, threads: a.threads, guiding };
+    let bar = progress_bar(!a.quiet && std::io::stderr().is_terminal());
+    let (field, report) = zerovar::render::train(&scene, &options, &|done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
+    })?;
+    bar.finish_and_clear();
+    field
+        .save(std::io::BufWriter::new(file))
+        .with_context(|| format!("{}: cannot write the field", a.output.display()))?;
+    eprintln!(
+        "{}: trained {} passes ({} spp) in {:.2} s: {} regions, {} lobes, {} KiB -> {}",
+        a.scene.scene.display(),
+        report.passes,
+        report.spp,
+        report.seconds,
+        report.field.regions,
+        report.field.lobes,
+        report.field.memory_bytes / 1024,
+        a.output.display()
+    );
+    Ok(())
 }
 
 fn parse_defines(raw: &[String]) -> Result<Vec<(String, String)>> {
@@ -147,7 +271,16 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
     {
         bail!("-o {}: the directory {} does not exist", output.display(), dir.display());
     }
+    let guiding = validate_guiding(&a.guiding, a.field.is_some())?;
+    let guiding = GuidingOptions { combine_training: a.combine_training, ..guiding };
+    if let Some(f) = &a.field
+        && !f.is_file()
+    {
+        bail!("--field {}: no such file; create one with `zerovar train`", f.display());
+    }
     Ok(RenderCommand {
+        guiding,
+        field: a.field,
         scene: a.scene.scene,
         defines,
         png: output.with_extension("png"),
@@ -159,41 +292,62 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
         stats: a.stats,
         exposure: a.exposure,
         progress: !a.quiet && std::io::stderr().is_terminal(),
+        tracker: a.scene.tracker,
     })
 }
 
 fn run_render(c: RenderCommand) -> Result<()> {
-    let scene = zerovar::scene::load(&c.scene, &c.defines)?;
+    let mut scene = zerovar::scene::load(&c.scene, &c.defines)?;
+    scene.set_tracker(c.tracker)?;
     let budget = match (c.time, c.spp) {
         (Some(t), _) => Budget::Time(t),
         (None, Some(n)) => Budget::Samples(n),
         (None, None) => Budget::Samples(scene.settings.spp),
     };
     let seed = c.seed.unwrap_or(scene.settings.seed);
-    let options = RenderOptions { budget, seed, threads: c.threads };
+    let options = RenderOptions { budget, seed, threads: c.threads, guiding: c.guiding };
     let bar = progress_bar(c.progress);
-    let result = render(&scene, &options, &|done, total| {
+    let report = |done, total| {
         bar.set_length(total);
         bar.set_position(done);
-    })?;
+    };
+    let result = match &c.field {
+        Some(path) => {
+            let file = std::fs::File::open(path)
+                .with_context(|| format!("{}: cannot open the field", path.display()))?;
+            let field = Field::load(std::io::BufReader::new(file))
+                .with_context(|| format!("{}: cannot load the field", path.display()))?;
+            render_with_field(&scene, &options, &field, &report)?
+        }
+        None => render(&scene, &options, &report)?,
+    };
     bar.finish_and_clear();
 
     let [w, h] = scene.camera.resolution;
-    let image = result.film.image();
+    let image = &result.image;
     let meta = ImageMetadata {
         spp: result.spp,
         seconds: result.seconds,
         seed,
         scene: c.scene.display().to_string(),
     };
-    write_exr(&c.output, w, h, &image, &meta)?;
-    write_png(&c.png, w, h, &image, c.exposure)?;
+    write_exr(&c.output, w, h, image, &meta)?;
+    write_png(&c.png, w, h, image, c.exposure)?;
     let mut stats = RenderStats::from_counters(&result.counters, result.seconds);
     stats.scene = meta.scene.clone();
     stats.spp = result.spp;
     stats.resolution = [w, h];
     stats.seed = seed;
     stats.threads = result.threads;
+    stats.training = result.training.as_ref().map(|t| TrainingStats {
+        passes: t.passes,
+        spp: t.spp,
+        seconds: t.seconds,
+        samples: t.samples,
+        regions: t.field.regions,
+        lobes: t.field.lobes,
+        memory_bytes: t.field.memory_bytes,
+    });
     if let Some(path) = &c.stats {
         write_stats(path, &stats)?;
     }

@@ -36,6 +36,12 @@ impl Grid {
         self.max
     }
 
+    /// The first channel of voxel `(x, y, z)`.
+    #[inline]
+    pub fn voxel(&self, x: usize, y: usize, z: usize) -> f32 {
+        self.data[((z * self.res[1] + y) * self.res[0] + x) * self.channels]
+    }
+
     /// The interpolated first channel at a point of the unit cube.
     #[inline]
     pub fn scalar(&self, p: Vec3A) -> f32 {

@@ -8,10 +8,12 @@
 //! `tracking` decides how to walk through a medium; this module only answers lookups.
 
 mod grid;
+mod majorant;
 mod noise;
 mod vol;
 
 pub use grid::Grid;
+pub use majorant::{CellSpan, Dda, MajorantGrid};
 pub use noise::NoiseCloud;
 pub use vol::{VolError, VolGrid};
 
@@ -76,6 +78,7 @@ pub struct Heterogeneous {
     albedo: AlbedoField,
     majorant: Spectrum,
     bounds: Aabb,
+    bound_grid: MajorantGrid,
 }
 
 impl Heterogeneous {
@@ -94,7 +97,44 @@ impl Heterogeneous {
             let c = Vec3A::new((i & 1) as f32, ((i >> 1) & 1) as f32, ((i >> 2) & 1) as f32);
             bounds = bounds.grow(to_world.point(c));
         }
-        Self { to_world, density, scale, tint, albedo, majorant, bounds }
+        let bound_grid = MajorantGrid::build(&density);
+        Self { to_world, density, scale, tint, albedo, majorant, bounds, bound_grid }
+    }
+
+    /// The coarse grid of density bounds (built with the medium), for local majorants and
+    /// minorants.
+    pub fn bound_grid(&self) -> &MajorantGrid {
+        &self.bound_grid
+    }
+
+    /// `scale * tint`: the extinction per unit density.
+    pub fn extinction_per_density(&self) -> Spectrum {
+        self.tint * self.scale
+    }
+
+    /// `ray` in the unit cube's space (the affine map keeps ray parameters).
+    #[inline]
+    pub fn local_ray(&self, ray: &Ray) -> Ray {
+        Ray::new(self.to_world.inv_point(ray.origin), self.to_world.inv_vector(ray.direction))
+    }
+
+    /// Extinction and albedo at a point of the unit cube (the medium's local space).
+    #[inline]
+    pub fn coefficients_local(&self, local: Vec3A) -> Coefficients {
+        if !(local.cmpge(Vec3A::ZERO).all() && local.cmple(Vec3A::ONE).all()) {
+            return Coefficients { sigma_t: Spectrum::ZERO, albedo: Spectrum::ZERO };
+        }
+        let sigma_t = self.tint * (self.scale * self.density.at(local));
+        Coefficients { sigma_t, albedo: self.albedo_local(local) }
+    }
+
+    /// The albedo at a point of the unit cube, without a density lookup.
+    #[inline]
+    pub fn albedo_local(&self, local: Vec3A) -> Spectrum {
+        match &self.albedo {
+            AlbedoField::Constant(a) => *a,
+            AlbedoField::Grid(g) => g.rgb(local),
+        }
     }
 
     /// A per-channel upper bound of the extinction anywhere in the medium.

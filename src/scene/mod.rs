@@ -213,7 +213,7 @@ impl Scene {
                 "  {:<12} {kind}, majorant {:?}: {}",
                 m.name,
                 m.majorant().to_array(),
-                t.describe()
+                crate::tracking::explain(m, *t)
             );
         }
         let _ = writeln!(s, "lights   {}", self.lights.len());

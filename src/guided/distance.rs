@@ -1,0 +1,510 @@
+//! Guided distance sampling: the zero-variance collision density along a ray in a medium,
+//! `p(t) ~ T(t) [sigma_s L_s(x_t, w) + sigma_a L_e] / L(x, w)`, with the end of the ray
+//! (surface or infinity) as the remaining event.
+//!
+//! In heterogeneous media the transmittance is unknown, so guiding works in the
+//! null-collision form (seed notes, section 3.2): tentative collisions come from the majorant,
+//! and at each one the walk scatters with a probability of its choice, reweighting by
+//! `sigma_s / (mu P_s)` or `sigma_n / (mu (1 - P_s))`. The zero-variance choice weighs
+//! in-scattered radiance `sigma_s L_s` against the radiance the path finds by going on,
+//! `sigma_n L(x, w)`; mixing it with delta tracking's `sigma_t / mu` keeps it robust.
+//!
+//! In homogeneous media the ray's stretch inside the medium is cut into segments. For each segment the cache gives
+//! the conditional probability of colliding in it once the walk has reached it (the estimated
+//! radiance the segment sends back over the radiance entering it), and inside a segment the
+//! offset follows a truncated exponential of a proxy coefficient. Segments are evaluated
+//! lazily, only as far as the walk goes (the incremental CDF: no normalisation pass over the
+//! whole ray). The standard strategy uses the same segments with the exponential's own
+//! probabilities, so the one-sample mixture `alpha p_guided + (1 - alpha) p_standard` has an
+//! exact density. The weights use the exact transmittance in homogeneous media and an
+//! independent ratio-tracking estimate in heterogeneous ones, so every channel stays unbiased.
+
+use super::RadianceCache;
+use crate::math::{Ray, Spectrum, luminance, positive};
+use crate::media::{Medium, MediumKind};
+use crate::rng::Sampler;
+use crate::stats::Counters;
+use crate::tracking::{transmittance, transmittance_homogeneous};
+
+/// Segments along the guided stretch of a ray.
+const SEGMENTS: usize = 8;
+/// The guided stretch ends where the standard transmittance falls to exp(-CUT); beyond it the
+/// rare remaining collisions follow the standard exponential.
+const CUT: f32 = 8.0;
+/// Bounds of the guided per-segment probability relative to the standard one, so a cache
+/// that is wrong (zero, or off by orders of magnitude) can neither remove support nor force
+/// every path into one segment.
+const MIN_RELATIVE: f32 = 0.1;
+const MAX_PROBABILITY: f32 = 0.95;
+
+#[derive(Clone, Copy, Debug, Default)]
+struct Segment {
+    start: f32,
+    length: f32,
+    /// Per channel: the channel's weight times its transmittance to the segment's start,
+    /// normalised to a largest entry of 1 (the mixture's mass still in play).
+    mass: Spectrum,
+    /// Per channel: 1 - exp(-sigma_c length).
+    collide: Spectrum,
+    /// The standard probability of colliding in the segment once there.
+    p_std: f32,
+    p_guided: f32,
+}
+
+/// The distance distribution of one ray through one medium.
+#[derive(Clone, Debug)]
+pub struct GuidedDistance {
+    ray: Ray,
+    /// The extinction per channel.
+    sigma: Spectrum,
+    alpha: f32,
+    guided_end: f32,
+    lookup_u: f32,
+    emission: f32,
+    segments: [Segment; SEGMENTS + 1],
+    count: usize,
+    computed: usize,
+    /// Whether the guided stretch reached the end of the ray (no tail segment).
+    ends_at_t_max: bool,
+}
+
+/// Where a guided flight ended.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GuidedEvent {
+    /// A real collision at `t` that scatters.
+    Scatter {
+        /// Ray parameter.
+        t: f32,
+    },
+    /// A real collision that absorbs the path (its emission is in `emitted`).
+    Absorb,
+    /// The flight passed the end of the ray.
+    Pass,
+}
+
+/// The outcome of a guided flight, as `tracking::Flight`.
+#[derive(Clone, Copy, Debug)]
+pub struct GuidedFlight {
+    /// The event.
+    pub event: GuidedEvent,
+    /// Multiplies the path throughput (zero after an absorption).
+    pub weight: Spectrum,
+    /// Emitted radiance collected, already multiplied by the incoming throughput.
+    pub emitted: Spectrum,
+}
+
+impl GuidedDistance {
+    /// The distribution for `ray` over `(0, t_max)` in a homogeneous `medium`, or `None` when
+    /// the ray cannot collide (empty medium) or the medium is heterogeneous.
+    /// `alpha` is the probability of the guided strategy; `lookup_u` drives the cache's
+    /// spatial filter for every lookup of this ray.
+    ///
+    /// The standard strategy is the one-sample mixture over channels of exponential free
+    /// paths, each channel weighted by `pick` (the path throughput: history-aware, which keeps
+    /// chromatic weights bounded); the guided one shares its shape inside each segment.
+    pub fn new(
+        medium: &Medium,
+        ray: &Ray,
+        t_max: f32,
+        pick: Spectrum,
+        alpha: f32,
+        lookup_u: f32,
+    ) -> Option<Self> {
+        let MediumKind::Homogeneous { sigma_t: sigma, .. } = medium.kind else {
+            // Heterogeneous media are guided in the null-collision form instead.
+            return None;
+        };
+        let total = pick.element_sum();
+        let pick = if total > 0.0 { pick / total } else { Spectrum::splat(1.0 / 3.0) };
+        let mean = pick.dot(sigma);
+        let (a, b) = (0.0, t_max);
+        if !positive(mean) || b <= a || b.is_nan() {
+            return None;
+        }
+        let guided_end = b.min(a + CUT / mean);
+        let ends_at_t_max = guided_end >= b;
+        let step = (guided_end - a) / SEGMENTS as f32;
+        let mut segments = [Segment::default(); SEGMENTS + 1];
+        for (k, s) in segments.iter_mut().enumerate().take(SEGMENTS) {
+            s.start = a + step * k as f32;
+            s.length = step;
+        }
+        let mut count = SEGMENTS;
+        if !ends_at_t_max {
+            segments[SEGMENTS] =
+                Segment { start: guided_end, length: b - guided_end, ..Default::default() };
+            count += 1;
+        }
+        for s in &mut segments[..count] {
+            // In log space relative to the largest, so deep segments do not underflow.
+            let log = Spectrum::select(
+                pick.cmpgt(Spectrum::ZERO),
+                ln(pick) - sigma * s.start,
+                Spectrum::splat(f32::NEG_INFINITY),
+            );
+            let top = log.max_element();
+            s.mass = exp(log - Spectrum::splat(top));
+            s.collide = if s.length.is_finite() {
+                Spectrum::select(
+                    sigma.cmpgt(Spectrum::ZERO),
+                    -exp_m1(-sigma * s.length),
+                    Spectrum::ZERO,
+                )
+            } else {
+                Spectrum::select(sigma.cmpgt(Spectrum::ZERO), Spectrum::ONE, Spectrum::ZERO)
+            };
+            s.p_std = s.mass.dot(s.collide) / s.mass.element_sum();
+            s.p_guided = s.p_std;
+        }
+        Some(Self {
+            ray: *ray,
+            sigma,
+            alpha,
+            guided_end,
+            lookup_u,
+            emission: luminance(medium.emission),
+            segments,
+            count,
+            computed: 0,
+            ends_at_t_max,
+        })
+    }
+
+    /// Computes the guided probability of segment `k` from the cache.
+    fn compute(
+        &mut self,
+        k: usize,
+        medium: &Medium,
+        cache: &mut impl RadianceCache,
+        counters: &mut Counters,
+    ) {
+        let s = &mut self.segments[k];
+        if s.start >= self.guided_end {
+            return; // the tail follows the standard exponential
+        }
+        let mid = self.ray.at(s.start + 0.5 * s.length);
+        if !cache.load(mid, self.lookup_u) {
+            return;
+        }
+        let c = medium.coefficients(mid);
+        if matches!(medium.kind, MediumKind::Heterogeneous(_)) {
+            counters.density_lookups += 1;
+        }
+        let sigma_t = luminance(c.sigma_t);
+        let sigma_s = luminance(c.sigma_t * c.albedo);
+        let incident = cache.incident(self.ray.direction);
+        if !(sigma_t > 0.0 && incident > 0.0) {
+            // No collision expected here, or no light known to enter: keep the floor only.
+            s.p_guided = MIN_RELATIVE * s.p_std;
+            return;
+        }
+        // The mean incident radiance stands for L_s: exact for isotropic scattering, close for
+        // moderate g, and an order of magnitude cheaper than the HG convolution per segment.
+        let source = sigma_s * cache.mean_radiance() + (sigma_t - sigma_s).max(0.0) * self.emission;
+        let collide = -(-sigma_t * s.length).exp_m1() / sigma_t;
+        let raw = collide * source / incident;
+        s.p_guided = if raw.is_finite() {
+            raw.clamp(MIN_RELATIVE * s.p_std, MAX_PROBABILITY.max(s.p_std))
+        } else {
+            s.p_std
+        };
+    }
+
+    fn ensure(
+        &mut self,
+        k: usize,
+        medium: &Medium,
+        cache: &mut impl RadianceCache,
+        counters: &mut Counters,
+    ) {
+        while self.computed <= k && self.computed < self.count {
+            self.compute(self.computed, medium, cache, counters);
+            self.computed += 1;
+        }
+    }
+
+    /// Density of the offset `x` inside segment `k` (truncated exponential).
+    fn offset_pdf(&self, k: usize, x: f32) -> f32 {
+        let s = &self.segments[k];
+        let density = s.mass * self.sigma * exp(-self.sigma * x);
+        density.element_sum() / s.mass.dot(s.collide)
+    }
+
+    /// Samples a collision distance, or `None` for passing the end of the ray; returns the
+    /// mixture density of the distance, or the mixture probability of passing.
+    pub fn sample(
+        &mut self,
+        medium: &Medium,
+        cache: &mut impl RadianceCache,
+        sampler: &mut Sampler,
+        counters: &mut Counters,
+    ) -> (Option<f32>, f32) {
+        let guided = sampler.next_1d() < self.alpha;
+        let (mut g, mut s) = (1.0f32, 1.0f32);
+        for k in 0..self.count {
+            self.ensure(k, medium, cache, counters);
+            let seg = self.segments[k];
+            let p = if guided { seg.p_guided } else { seg.p_std };
+            if sampler.next_1d() < p {
+                // A truncated exponential offset; the cut keeps it inside the segment.
+                // A channel by its share of the segment's collisions, then its truncated
+                // exponential, cut to stay inside the segment.
+                let share = seg.mass * seg.collide;
+                let v = sampler.next_1d() * share.element_sum();
+                let c = if v < share.x {
+                    0
+                } else if v < share.x + share.y || share.z == 0.0 {
+                    1
+                } else {
+                    2
+                };
+                let u = sampler.next_1d();
+                let x =
+                    (-(-u * seg.collide[c]).ln_1p() / self.sigma[c]).min(seg.length * (1.0 - 1e-6));
+                let mix = self.alpha * g * seg.p_guided + (1.0 - self.alpha) * s * seg.p_std;
+                return (Some(seg.start + x), mix * self.offset_pdf(k, x));
+            }
+            g *= 1.0 - seg.p_guided;
+            s *= 1.0 - seg.p_std;
+        }
+        (None, self.alpha * g + (1.0 - self.alpha) * s)
+    }
+
+    /// The mixture density of colliding at `t` (for tests and MIS).
+    pub fn pdf(
+        &mut self,
+        t: f32,
+        medium: &Medium,
+        cache: &mut impl RadianceCache,
+        counters: &mut Counters,
+    ) -> f32 {
+        let (mut g, mut s) = (1.0f32, 1.0f32);
+        for k in 0..self.count {
+            self.ensure(k, medium, cache, counters);
+            let seg = self.segments[k];
+            if t >= seg.start && (t < seg.start + seg.length || k + 1 == self.count) {
+                let mix = self.alpha * g * seg.p_guided + (1.0 - self.alpha) * s * seg.p_std;
+                return mix * self.offset_pdf(k, t - seg.start);
+            }
+            g *= 1.0 - seg.p_guided;
+            s *= 1.0 - seg.p_std;
+        }
+        0.0
+    }
+
+    /// The mixture probability of passing the end of the ray.
+    pub fn pass_probability(
+        &mut self,
+        medium: &Medium,
+        cache: &mut impl RadianceCache,
+        counters: &mut Counters,
+    ) -> f32 {
+        self.ensure(self.count, medium, cache, counters);
+        let g: f32 = self.segments[..self.count].iter().map(|s| 1.0 - s.p_guided).product();
+        let s: f32 = self.segments[..self.count].iter().map(|s| 1.0 - s.p_std).product();
+        self.alpha * g + (1.0 - self.alpha) * s
+    }
+
+    /// Whether the ray's end is reachable (finite and not cut off by a tail).
+    pub fn ends_at_t_max(&self) -> bool {
+        self.ends_at_t_max
+    }
+}
+
+/// A guided free flight along `ray` within `(0, t_max)` in `medium`, for throughput `beta`.
+#[allow(clippy::too_many_arguments)]
+pub fn guided_flight(
+    medium: &Medium,
+    ray: &Ray,
+    t_max: f32,
+    beta: Spectrum,
+    alpha: f32,
+    cache: &mut impl RadianceCache,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> GuidedFlight {
+    let pass =
+        GuidedFlight { event: GuidedEvent::Pass, weight: Spectrum::ONE, emitted: Spectrum::ZERO };
+    let lookup_u = sampler.next_1d();
+    if let MediumKind::Heterogeneous(h) = &medium.kind {
+        let Some((t0, t1)) = h.clip(ray, t_max) else { return pass };
+        let majorant = h.majorant().max_element();
+        if !positive(majorant) {
+            return pass;
+        }
+        return null_collision_flight(
+            medium,
+            ray,
+            (t0, t1),
+            majorant,
+            beta,
+            alpha,
+            lookup_u,
+            cache,
+            sampler,
+            counters,
+        );
+    }
+    if let MediumKind::Homogeneous { sigma_t, .. } = medium.kind
+        && sigma_t.min_element() <= 0.0
+        && sigma_t.max_element() > 0.0
+        && t_max.is_infinite()
+    {
+        // A channel that never collides must be able to escape to infinity, which the guided
+        // stretch cannot express: such rays keep the standard tracker.
+        let f = crate::tracking::sample_flight(
+            medium,
+            crate::tracking::Tracker::for_medium(medium),
+            ray,
+            t_max,
+            beta,
+            sampler,
+            counters,
+        );
+        let event = match f.event {
+            crate::tracking::FlightEvent::Scatter { t } => GuidedEvent::Scatter { t },
+            crate::tracking::FlightEvent::Escape => GuidedEvent::Pass,
+        };
+        return GuidedFlight { event, weight: f.weight, emitted: f.emitted };
+    }
+    let Some(mut dist) = GuidedDistance::new(medium, ray, t_max, beta, alpha, lookup_u) else {
+        return pass;
+    };
+    let (t, pdf) = dist.sample(medium, cache, sampler, counters);
+    let tr = |t: f32, sampler: &mut Sampler, counters: &mut Counters| match &medium.kind {
+        MediumKind::Homogeneous { sigma_t, .. } => transmittance_homogeneous(*sigma_t, t),
+        MediumKind::Heterogeneous(_) => transmittance(medium, ray, t, sampler, counters),
+    };
+    let Some(t) = t else {
+        let weight = if pdf > 0.0 { tr(t_max, sampler, counters) / pdf } else { Spectrum::ZERO };
+        return GuidedFlight { weight, ..pass };
+    };
+    if !positive(pdf) {
+        return GuidedFlight {
+            event: GuidedEvent::Absorb,
+            weight: Spectrum::ZERO,
+            emitted: Spectrum::ZERO,
+        };
+    }
+    let x = ray.at(t);
+    let c = medium.coefficients(x);
+    if matches!(medium.kind, MediumKind::Heterogeneous(_)) {
+        counters.density_lookups += 1;
+    }
+    let w = tr(t, sampler, counters) / pdf;
+    let sigma_s = c.sigma_t * c.albedo;
+    let sigma_a = (c.sigma_t - sigma_s).max(Spectrum::ZERO);
+    if !medium.is_emissive() {
+        return GuidedFlight {
+            event: GuidedEvent::Scatter { t },
+            weight: w * sigma_s,
+            emitted: Spectrum::ZERO,
+        };
+    }
+    // Absorb or scatter, in proportion to what each brings back (the zero-variance choice):
+    // emission sigma_a L_e against in-scattered sigma_s L_s.
+    let emit = luminance(sigma_a * medium.emission);
+    let scatter = if cache.load(x, lookup_u) {
+        luminance(sigma_s) * cache.inscattered(ray.direction, medium.phase.mean_cosine())
+    } else {
+        luminance(sigma_s) * luminance(medium.emission)
+    };
+    let p_absorb = if emit <= 0.0 {
+        0.0
+    } else if luminance(sigma_s) <= 0.0 {
+        1.0
+    } else {
+        let p = emit / (emit + scatter);
+        if p.is_finite() { p.clamp(0.05, 0.95) } else { 0.5 }
+    };
+    if sampler.next_1d() < p_absorb {
+        let emitted = beta * w * sigma_a * medium.emission / p_absorb;
+        return GuidedFlight { event: GuidedEvent::Absorb, weight: Spectrum::ZERO, emitted };
+    }
+    GuidedFlight {
+        event: GuidedEvent::Scatter { t },
+        weight: w * sigma_s / (1.0 - p_absorb),
+        emitted: Spectrum::ZERO,
+    }
+}
+
+/// Guided flight in the null-collision form through a heterogeneous medium over `(t0, t1)`.
+#[allow(clippy::too_many_arguments)]
+fn null_collision_flight(
+    medium: &Medium,
+    ray: &Ray,
+    (t0, t1): (f32, f32),
+    majorant: f32,
+    beta: Spectrum,
+    alpha: f32,
+    lookup_u: f32,
+    cache: &mut impl RadianceCache,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> GuidedFlight {
+    let emissive = medium.is_emissive();
+    // Cache estimates are refreshed every eighth of the stretch: regions are coarser than the
+    // spacing of tentative collisions, and a lookup costs far more than a density lookup.
+    let refresh = (t1 - t0) / SEGMENTS as f32;
+    let mut cached: Option<(f32, f32, f32)> = None; // (t of lookup, L_s, L)
+    let mut weight = Spectrum::ONE;
+    let mut emitted = Spectrum::ZERO;
+    let mut t = t0;
+    loop {
+        t += -(-sampler.next_1d()).ln_1p() / majorant;
+        if t >= t1 {
+            return GuidedFlight { event: GuidedEvent::Pass, weight, emitted };
+        }
+        let x = ray.at(t);
+        let c = medium.coefficients(x);
+        counters.density_lookups += 1;
+        let sigma_s = c.sigma_t * c.albedo;
+        let sigma_n = (Spectrum::splat(majorant) - c.sigma_t).max(Spectrum::ZERO);
+        let path = beta * weight;
+        if emissive {
+            emitted += path * (c.sigma_t - sigma_s) * medium.emission / majorant;
+        }
+        // Standard choice: history-aware spectral tracking (delta tracking when grey).
+        let (ps, pn) = (luminance(path * sigma_s), luminance(path * sigma_n));
+        if !positive(ps + pn) {
+            return GuidedFlight { event: GuidedEvent::Absorb, weight: Spectrum::ZERO, emitted };
+        }
+        let p_std = ps / (ps + pn);
+        let mut p_scatter = p_std;
+        if alpha > 0.0 && ps > 0.0 && pn > 0.0 {
+            if cached.is_none_or(|(at, _, _)| t - at > refresh) {
+                cached = cache
+                    .load(x, lookup_u)
+                    .then(|| (t, cache.mean_radiance(), cache.incident(ray.direction)));
+            }
+            if let Some((_, ls, li)) = cached {
+                let (a, b) = (ps * ls, pn * li);
+                if a + b > 0.0 && (a + b).is_finite() {
+                    // Bounded away from 0 and 1, so neither event loses support.
+                    let zv = (a / (a + b)).clamp(0.02, 0.98);
+                    p_scatter = alpha * zv + (1.0 - alpha) * p_std;
+                }
+            }
+        }
+        if sampler.next_1d() < p_scatter {
+            weight *= sigma_s / (majorant * p_scatter);
+            return GuidedFlight { event: GuidedEvent::Scatter { t }, weight, emitted };
+        }
+        weight *= sigma_n / (majorant * (1.0 - p_scatter));
+    }
+}
+
+#[inline]
+fn exp(v: Spectrum) -> Spectrum {
+    Spectrum::new(v.x.exp(), v.y.exp(), v.z.exp())
+}
+
+#[inline]
+fn exp_m1(v: Spectrum) -> Spectrum {
+    Spectrum::new(v.x.exp_m1(), v.y.exp_m1(), v.z.exp_m1())
+}
+
+#[inline]
+fn ln(v: Spectrum) -> Spectrum {
+    Spectrum::new(v.x.ln(), v.y.ln(), v.z.ln())
+}

@@ -1,0 +1,498 @@
+//! The volumetric random walk shared by the unguided and the guided path tracer.
+//!
+//! With nothing guided it is the standard volumetric path tracer: free flights from each
+//! medium's tracker, next-event estimation at every real scattering event weighed by the power
+//! heuristic against phase or BSDF sampling, null surfaces crossed without a bounce, Mitsuba's
+//! depth counting and Russian roulette. Each guided component replaces one decision by its
+//! zero-variance counterpart mixed with the standard one (`guided`): distances, directions
+//! (product sampling) and roulette with splitting (weight windows). Split copies wait on a
+//! fixed-size stack, so a walk never allocates.
+
+use crate::bsdf::Bsdf;
+use crate::guided::distance::{GuidedEvent, guided_flight};
+use crate::guided::{Components, RadianceCache, window};
+use crate::lights::Light;
+use crate::math::{Frame, Ray, Spectrum, luminance, positive, power_heuristic};
+use crate::rng::Sampler;
+use crate::scene::{Scene, offset_origin};
+use crate::stats::Counters;
+use crate::tracking::{FlightEvent, sample_flight, transmittance_tracked};
+use glam::Vec3A;
+use zerovar_guiding::PathRecorder;
+
+/// A path crossing more null surfaces than this in a row is stuck in degenerate geometry.
+const MAX_NULL_CROSSINGS: u32 = 4096;
+/// Split copies waiting to be traced at once, per camera sample.
+const STACK: usize = 32;
+/// Most walks (the camera path and all its split copies) per camera sample: splitting stops
+/// there, so a cache that overestimates wildly cannot make a sample cost without bound.
+pub const MAX_WALKS: usize = 64;
+/// Depth from which paths steered by weight windows also meet standard roulette.
+const WINDOW_RR_DEPTH: u32 = 256;
+/// Largest share of guided sampling in every mixture. Standard sampling always keeps 20%:
+/// a fitted mixture underflows to zero density far from its lobes, where light may still
+/// arrive, and a path that goes where the cache says it should not would otherwise carry a
+/// weight compounding without bound; with 20% no guided weight exceeds five standard ones.
+pub const MAX_ALPHA: f32 = 0.8;
+
+/// Settings of the walk.
+#[derive(Clone, Copy, Debug)]
+pub struct WalkSettings {
+    /// Longest path in scattering events; `None` is unlimited.
+    pub max_depth: Option<u32>,
+    /// Depth from which standard Russian roulette applies.
+    pub rr_depth: u32,
+    /// Which decisions are guided.
+    pub guide: Components,
+    /// Probability of the guided strategy in each mixture, in [0, 1].
+    pub alpha: f32,
+}
+
+/// What the walk needs to know about the pixel and the training it feeds.
+pub struct WalkContext<'a, C> {
+    /// The radiance cache.
+    pub cache: &'a mut C,
+    /// The pixel's estimated value (luminance), for weight windows; `None` before any.
+    pub pixel: Option<f32>,
+    /// Records training samples when set (splitting is then off: a path stays a chain).
+    pub recorder: Option<&'a mut PathRecorder>,
+}
+
+/// How the current direction was chosen, for MIS when it finds an emitter.
+#[derive(Clone, Copy)]
+struct Previous {
+    position: Vec3A,
+    pdf: f32,
+    delta: bool,
+}
+
+/// Everything that continues a path: the unit pushed when a path splits.
+#[derive(Clone, Copy)]
+struct PathState {
+    ray: Ray,
+    medium: Option<u32>,
+    beta: Spectrum,
+    eta: f32,
+    depth: u32,
+    prev: Previous,
+}
+
+/// Split copies waiting to be traced, and how many walks this camera sample has made.
+struct Branches {
+    stack: [PathState; STACK],
+    pending: usize,
+    walks: usize,
+}
+
+/// Estimates the radiance arriving along `ray`, which starts in `medium`.
+pub fn radiance<C: RadianceCache>(
+    settings: &WalkSettings,
+    scene: &Scene,
+    ray: Ray,
+    medium: Option<u32>,
+    ctx: &mut WalkContext<'_, C>,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> Spectrum {
+    let prev = Previous { position: ray.origin, pdf: 1.0, delta: true };
+    let state = PathState { ray, medium, beta: Spectrum::ONE, eta: 1.0, depth: 0, prev };
+    let mut branches = Branches { stack: [state; STACK], pending: 1, walks: 1 };
+    let mut l = Spectrum::ZERO;
+    counters.paths += 1;
+    while branches.pending > 0 {
+        branches.pending -= 1;
+        let state = branches.stack[branches.pending];
+        counters.walks += 1;
+        l += walk(settings, scene, state, ctx, &mut branches, sampler, counters);
+    }
+    l
+}
+
+#[allow(clippy::too_many_arguments)]
+fn walk<C: RadianceCache>(
+    settings: &WalkSettings,
+    scene: &Scene,
+    mut s: PathState,
+    ctx: &mut WalkContext<'_, C>,
+    branches: &mut Branches,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> Spectrum {
+    let guide = settings.guide;
+    let alpha = settings.alpha.min(MAX_ALPHA);
+    let window_rr = guide.roulette && ctx.pixel.is_some();
+    let mut l = Spectrum::ZERO;
+    let mut nulls = 0u32;
+    loop {
+        counters.segments += 1;
+        let hit = scene.intersect(&s.ray, f32::INFINITY);
+        let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
+
+        if let Some(m) = s.medium {
+            let mi = m as usize;
+            let medium = &scene.media[mi];
+            let (scatter_t, weight, emitted) = if guide.distances {
+                let f = guided_flight(
+                    medium, &s.ray, t_max, s.beta, alpha, ctx.cache, sampler, counters,
+                );
+                match f.event {
+                    GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted),
+                    GuidedEvent::Pass => (None, f.weight, f.emitted),
+                    GuidedEvent::Absorb => {
+                        record_contribution(ctx, f.emitted);
+                        return l + f.emitted;
+                    }
+                }
+            } else {
+                let f = sample_flight(
+                    medium,
+                    scene.trackers[mi],
+                    &s.ray,
+                    t_max,
+                    s.beta,
+                    sampler,
+                    counters,
+                );
+                let t = match f.event {
+                    FlightEvent::Scatter { t } => Some(t),
+                    FlightEvent::Escape => None,
+                };
+                (t, f.weight, f.emitted)
+            };
+            l += emitted;
+            record_contribution(ctx, emitted);
+            s.beta *= weight;
+            if let Some(t) = scatter_t {
+                counters.medium_scatters += 1;
+                s.depth += 1;
+                if settings.max_depth.is_some_and(|d| s.depth >= d) || s.beta.max_element() <= 0.0 {
+                    break;
+                }
+                let p = s.ray.at(t);
+                let phase = medium.phase;
+                let dir = s.ray.direction;
+                let g = phase.mean_cosine();
+                let loaded = guide.any() && ctx.cache.load(p, sampler.next_1d());
+                if window_rr && loaded {
+                    // After the distance decision: the path's expected worth is beta L_s.
+                    let q = window::factor(
+                        luminance(s.beta),
+                        ctx.cache.inscattered(dir, g),
+                        ctx.pixel.unwrap_or(0.0),
+                    );
+                    if q < 1.0 {
+                        if sampler.next_1d() >= q {
+                            break;
+                        }
+                        s.beta /= q;
+                    }
+                }
+                let product = guide.directions && loaded && ctx.cache.product_hg(dir, g);
+                let mix_pdf = |cache: &C, wi: Vec3A| {
+                    let pp = phase.eval(dir, wi);
+                    if product { alpha * cache.pdf(wi) + (1.0 - alpha) * pp } else { pp }
+                };
+                let direct = sample_light(scene, p, None, s.medium, sampler, counters, |wi| {
+                    (Spectrum::splat(phase.eval(dir, wi)), mix_pdf(ctx.cache, wi))
+                });
+                l += s.beta * direct.contribution;
+                let (wi, pdf) = if product && sampler.next_1d() < alpha {
+                    let (wi, _) = ctx.cache.sample(sampler.next_2d());
+                    (wi, mix_pdf(ctx.cache, wi))
+                } else {
+                    let (wi, pp) = phase.sample(dir, sampler.next_2d());
+                    (wi, if product { mix_pdf(ctx.cache, wi) } else { pp })
+                };
+                if !positive(pdf) {
+                    break;
+                }
+                s.beta *= phase.eval(dir, wi) / pdf;
+                record_vertex(ctx, p, wi, pdf, s.beta, true, &direct);
+                s.ray = Ray::new(p, wi);
+                s.prev = Previous { position: p, pdf, delta: false };
+                nulls = 0;
+                let adjoint = if window_rr && loaded { ctx.cache.mean_radiance() } else { 0.0 };
+                if !continue_path(settings, &mut s, adjoint, ctx, branches, sampler) {
+                    break;
+                }
+                continue;
+            }
+            if s.beta.max_element() <= 0.0 {
+                break;
+            }
+        }
+
+        let Some(hit) = hit else {
+            for &li in &scene.infinite_lights {
+                let (le, pdf) = scene.lights[li as usize].eval_escaped(s.ray.direction);
+                if le.max_element() > 0.0 {
+                    let c = s.beta * le * mis_emitter(scene, s.prev, pdf);
+                    l += c;
+                    record_contribution(ctx, c);
+                }
+            }
+            break;
+        };
+
+        let surface = &scene.surfaces[hit.shape as usize];
+        if let Some(li) = surface.light {
+            let light = &scene.lights[li as usize];
+            let le = light.eval_area(hit.ng, -s.ray.direction);
+            if le.max_element() > 0.0 {
+                let pdf = light.pdf_area(&scene.shapes, s.prev.position, hit.p, hit.ng);
+                let c = s.beta * le * mis_emitter(scene, s.prev, pdf);
+                l += c;
+                record_contribution(ctx, c);
+            }
+        }
+
+        if surface.bsdf == Bsdf::Null {
+            nulls += 1;
+            if nulls > MAX_NULL_CROSSINGS {
+                break;
+            }
+            s.medium = scene.medium_after(&hit, s.ray.direction);
+            s.ray = Ray::new(offset_origin(hit.p, hit.ng, s.ray.direction), s.ray.direction);
+            continue;
+        }
+
+        counters.surface_scatters += 1;
+        s.depth += 1;
+        if settings.max_depth.is_some_and(|d| s.depth >= d) {
+            break;
+        }
+        let bsdf = surface.bsdf;
+        let frame = Frame::from_z(hit.ns);
+        let wo = frame.to_local(-s.ray.direction);
+        let smooth = bsdf.has_smooth_component();
+        let loaded = smooth && guide.any() && ctx.cache.load(hit.p, sampler.next_1d());
+        let product = guide.directions && loaded && ctx.cache.product_cosine(hit.ns);
+        let mix_pdf = |cache: &C, wi: Vec3A| {
+            let pb = bsdf.pdf(wo, frame.to_local(wi));
+            if product { alpha * cache.pdf(wi) + (1.0 - alpha) * pb } else { pb }
+        };
+        let mut direct = DirectSample::NONE;
+        if smooth {
+            direct = sample_light(scene, hit.p, Some(hit.ng), s.medium, sampler, counters, |wi| {
+                (bsdf.eval(wo, frame.to_local(wi), hit.uv), mix_pdf(ctx.cache, wi))
+            });
+            l += s.beta * direct.contribution;
+        }
+        let u1 = sampler.next_1d();
+        let (wi, weight, pdf, delta, eta) = if product && u1 < alpha {
+            let (wi, _) = ctx.cache.sample(sampler.next_2d());
+            let pdf = mix_pdf(ctx.cache, wi);
+            let f = bsdf.eval(wo, frame.to_local(wi), hit.uv);
+            (wi, if pdf > 0.0 { f / pdf } else { Spectrum::ZERO }, pdf, false, 1.0)
+        } else {
+            // Reuse u1 rescaled so the standard branch sees a uniform number too.
+            let u1 = if product { (u1 - alpha) / (1.0 - alpha) } else { u1 };
+            let Some(bs) = bsdf.sample(wo, hit.uv, u1, sampler.next_2d()) else { break };
+            let wi = frame.to_world(bs.wi).normalize();
+            if product && !bs.delta {
+                let pdf = mix_pdf(ctx.cache, wi);
+                let f = bsdf.eval(wo, bs.wi, hit.uv);
+                (wi, f / pdf, pdf, false, bs.eta)
+            } else {
+                (wi, bs.weight, bs.pdf, bs.delta, bs.eta)
+            }
+        };
+        // Shading and geometric normals may disagree: a direction under the geometric
+        // surface would leak light through it.
+        if !delta && (wi.dot(hit.ng) > 0.0) != (frame.to_local(wi).z > 0.0) {
+            break;
+        }
+        if weight.max_element() <= 0.0 || !positive(pdf) {
+            break;
+        }
+        s.beta *= weight;
+        s.eta *= eta;
+        if !delta {
+            record_vertex(ctx, hit.p, wi, pdf, s.beta, false, &direct);
+        }
+        s.medium = scene.medium_after(&hit, wi);
+        s.ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
+        s.prev = Previous { position: hit.p, pdf, delta };
+        nulls = 0;
+        let adjoint = if window_rr && loaded { ctx.cache.mean_radiance() } else { 0.0 };
+        if !continue_path(settings, &mut s, adjoint, ctx, branches, sampler) {
+            break;
+        }
+    }
+    l
+}
+
+/// Russian roulette (or splitting) after a direction was chosen; false when the path ends.
+/// With a usable `adjoint` and a pixel estimate, the weight window decides (and very deep
+/// paths meet the standard rule too); otherwise the standard rule from `rr_depth` on.
+fn continue_path<C>(
+    settings: &WalkSettings,
+    s: &mut PathState,
+    adjoint: f32,
+    ctx: &WalkContext<'_, C>,
+    branches: &mut Branches,
+    sampler: &mut Sampler,
+) -> bool {
+    if adjoint > 0.0
+        && let Some(pixel) = ctx.pixel
+    {
+        let mut q = window::factor(luminance(s.beta), adjoint, pixel);
+        let room = (STACK - branches.pending).min(MAX_WALKS - branches.walks + 1);
+        if q > 1.0 && ctx.recorder.is_some() {
+            q = 1.0; // training paths stay chains for the recorder
+        }
+        // Limiting q itself (not the rounded count) to the room left keeps E[n] / q = 1.
+        q = q.min(room.max(1) as f32);
+        let n = window::copies(q, sampler.next_1d());
+        if n == 0 {
+            return false;
+        }
+        s.beta /= q;
+        for _ in 1..n {
+            branches.stack[branches.pending] = *s;
+            branches.pending += 1;
+            branches.walks += 1;
+        }
+        // A window that keeps returning 1 (an albedo-1 medium, a flat cache) must not make a
+        // walk endless: deep paths get the standard roulette as well.
+        if n > 1 || s.depth < settings.rr_depth.max(WINDOW_RR_DEPTH) {
+            return true;
+        }
+    } else if s.depth < settings.rr_depth {
+        return true;
+    }
+    let q = (s.beta.max_element() * s.eta * s.eta).min(0.95);
+    if q.is_nan() || q <= 0.0 || sampler.next_1d() >= q {
+        return false;
+    }
+    s.beta /= q;
+    true
+}
+
+/// MIS weight of an emitter found by the previous direction sample.
+#[inline]
+fn mis_emitter(scene: &Scene, prev: Previous, light_pdf: f32) -> f32 {
+    if prev.delta { 1.0 } else { power_heuristic(prev.pdf, light_pdf / scene.lights.len() as f32) }
+}
+
+/// One next-event estimate: its contribution (before the path throughput) and what training
+/// learns from it.
+#[derive(Clone, Copy)]
+struct DirectSample {
+    contribution: Spectrum,
+    wi: Vec3A,
+    pdf: f32,
+    /// MIS-weighted radiance arriving from `wi`.
+    radiance: f32,
+}
+
+impl DirectSample {
+    const NONE: DirectSample =
+        DirectSample { contribution: Spectrum::ZERO, wi: Vec3A::Z, pdf: 0.0, radiance: 0.0 };
+}
+
+/// Next-event estimation: one light chosen uniformly, a direction sampled on it, weighed
+/// against the scattering strategy `eval(wi) -> (f, pdf)` with the power heuristic.
+fn sample_light(
+    scene: &Scene,
+    p: Vec3A,
+    ng: Option<Vec3A>,
+    medium: Option<u32>,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+    eval: impl Fn(Vec3A) -> (Spectrum, f32),
+) -> DirectSample {
+    let n = scene.lights.len();
+    let pick = sampler.next_1d();
+    let u = sampler.next_2d();
+    if n == 0 {
+        return DirectSample::NONE;
+    }
+    let light = &scene.lights[((pick * n as f32) as usize).min(n - 1)];
+    let Some(ls) = light.sample(&scene.shapes, p, u) else { return DirectSample::NONE };
+    let (f, pdf_dir) = eval(ls.wi);
+    if f.max_element() <= 0.0 {
+        return DirectSample::NONE;
+    }
+    let origin = ng.map_or(p, |n| offset_origin(p, n, ls.wi));
+    let reach =
+        if matches!(light, Light::Area { .. }) { ls.distance * (1.0 - 1e-4) } else { ls.distance };
+    let tr = shadow_transmittance(scene, Ray::new(origin, ls.wi), reach, medium, sampler, counters);
+    if tr.max_element() <= 0.0 {
+        return DirectSample::NONE;
+    }
+    let light_pdf = ls.pdf / n as f32;
+    let w = if ls.delta { 1.0 } else { power_heuristic(light_pdf, pdf_dir) };
+    let arriving = tr * ls.radiance * w;
+    DirectSample {
+        contribution: f * arriving / light_pdf,
+        wi: ls.wi,
+        // For a delta light radiance / pdf is its irradiance over the selection probability:
+        // the sample is a Dirac in the training data, which is what the field should learn.
+        pdf: light_pdf,
+        radiance: luminance(arriving),
+    }
+}
+
+fn record_vertex<C>(
+    ctx: &mut WalkContext<'_, C>,
+    p: Vec3A,
+    wi: Vec3A,
+    pdf: f32,
+    beta: Spectrum,
+    volume: bool,
+    direct: &DirectSample,
+) {
+    if let Some(r) = ctx.recorder.as_deref_mut() {
+        r.add_vertex(p.into(), wi.into(), pdf, luminance(beta), volume);
+        if direct.pdf > 0.0 && direct.radiance > 0.0 {
+            r.add_direct_sample(p.into(), direct.wi.into(), direct.pdf, direct.radiance, volume);
+        }
+    }
+}
+
+#[inline]
+fn record_contribution<C>(ctx: &mut WalkContext<'_, C>, c: Spectrum) {
+    if let Some(r) = ctx.recorder.as_deref_mut() {
+        let v = luminance(c);
+        if v > 0.0 {
+            r.add_weighted_contribution(v);
+        }
+    }
+}
+
+/// Transmittance along a shadow ray through media and null surfaces; zero when anything else
+/// blocks it.
+pub fn shadow_transmittance(
+    scene: &Scene,
+    mut ray: Ray,
+    mut distance: f32,
+    mut medium: Option<u32>,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> Spectrum {
+    let mut tr = Spectrum::ONE;
+    for _ in 0..MAX_NULL_CROSSINGS {
+        let hit = scene.intersect(&ray, distance);
+        let seg = hit.as_ref().map_or(distance, |h| h.t);
+        if let Some(m) = medium {
+            let (mi, tracker) = (m as usize, scene.trackers[m as usize]);
+            tr *= transmittance_tracked(&scene.media[mi], tracker, &ray, seg, sampler, counters);
+            if tr.max_element() <= 0.0 {
+                return Spectrum::ZERO;
+            }
+        }
+        let Some(hit) = hit else { return tr };
+        if scene.surfaces[hit.shape as usize].bsdf != Bsdf::Null {
+            return Spectrum::ZERO;
+        }
+        medium = scene.medium_after(&hit, ray.direction);
+        let origin = offset_origin(hit.p, hit.ng, ray.direction);
+        distance -= (origin - ray.origin).length();
+        if distance <= 0.0 {
+            return tr;
+        }
+        ray = Ray::new(origin, ray.direction);
+    }
+    Spectrum::ZERO
+}

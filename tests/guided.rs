@@ -1,0 +1,431 @@
+//! Guided walks: the distance sampler against its own density, the zero-variance property
+//! with an analytic cache, robustness of splitting to a wrong cache, and convergence of every
+//! guided component to the unguided image (the proof of unbiasedness).
+
+use crate::common::scene;
+use glam::{Vec2, Vec3A};
+use std::cell::RefCell;
+use zerovar::film::Film;
+use zerovar::guided::distance::GuidedDistance;
+use zerovar::guided::{Components, RadianceCache};
+use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
+use zerovar::math::{Ray, luminance};
+use zerovar::media::Medium;
+use zerovar::render::{Budget, GuidingOptions, RenderOptions, TrainBudget, render};
+use zerovar::rng::Sampler;
+use zerovar::scene::Scene;
+use zerovar::stats::Counters;
+use zerovar_testkit::{MeanEstimate, chi2_1d, integrate_1d};
+
+/// A cache with fixed estimates: `incident` and `inscattered` times a bright blob around
+/// `centre` (so guided probabilities vary along a ray), all scaled by `scale`.
+#[derive(Clone)]
+struct Analytic {
+    incident: f32,
+    inscattered: f32,
+    blob: Option<Vec3A>,
+    scale: f32,
+    at: Vec3A,
+}
+
+impl Analytic {
+    fn constant(value: f32) -> Self {
+        Self { incident: value, inscattered: value, blob: None, scale: 1.0, at: Vec3A::ZERO }
+    }
+    fn factor(&self) -> f32 {
+        let blob = self.blob.map_or(0.0, |c| 40.0 * (-(self.at - c).length_squared()).exp());
+        self.scale * (1.0 + blob)
+    }
+}
+
+impl RadianceCache for Analytic {
+    fn load(&mut self, x: Vec3A, _: f32) -> bool {
+        self.at = x;
+        true
+    }
+    fn incident(&self, _: Vec3A) -> f32 {
+        self.incident * self.scale
+    }
+    fn mean_radiance(&self) -> f32 {
+        self.incident * self.scale
+    }
+    fn inscattered(&self, _: Vec3A, _: f32) -> f32 {
+        self.inscattered * self.factor()
+    }
+    fn product_hg(&mut self, _: Vec3A, _: f32) -> bool {
+        false
+    }
+    fn product_cosine(&mut self, _: Vec3A) -> bool {
+        false
+    }
+    fn sample(&self, _: Vec2) -> (Vec3A, f32) {
+        (Vec3A::Z, 0.0)
+    }
+    fn pdf(&self, _: Vec3A) -> f32 {
+        0.0
+    }
+}
+
+fn medium_of(text: &str) -> Medium {
+    let s = scene(&format!(
+        "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 30\nresolution = [4, 4]\n\n[media.m]\n{text}\n\n[[lights]]\ntype = \"constant\"\nradiance = 1\n"
+    ));
+    s.media[0].clone()
+}
+
+#[test]
+fn guided_distances_follow_their_density_which_integrates_to_one() {
+    let cases = [
+        ("type = \"homogeneous\"\nsigma_t = 0.8\nalbedo = 0.7", 6.0f32),
+        ("type = \"homogeneous\"\nsigma_t = [0.3, 0.8, 2.0]\nalbedo = 0.9", 6.0),
+    ];
+    for (text, t_max) in cases {
+        let medium = medium_of(text);
+        let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
+        for alpha in [0.3f32, 1.0] {
+            let cache =
+                Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), ..Analytic::constant(1.0) };
+            let state = RefCell::new((
+                GuidedDistance::new(&medium, &ray, t_max, Vec3A::new(0.2, 0.5, 0.3), alpha, 0.5)
+                    .unwrap(),
+                cache,
+            ));
+            let pdf = |t: f64| {
+                let (d, c) = &mut *state.borrow_mut();
+                d.pdf(t as f32, &medium, c, &mut Counters::default()) as f64
+            };
+            let pass = {
+                let (d, c) = &mut *state.borrow_mut();
+                d.pass_probability(&medium, c, &mut Counters::default()) as f64
+            };
+            // Segment boundaries fall on multiples of t_max / 8; bins and pieces align with them.
+            let total = integrate_1d(&pdf, 0.0, t_max as f64, 96) + pass;
+            assert!(
+                (total - 1.0).abs() < 1e-4,
+                "{text}, alpha {alpha}: density integrates to {total}"
+            );
+            let mut sampler = Sampler::new(5, 0, 0);
+            let samples: Vec<f64> = (0..100_000)
+                .map(|_| {
+                    let (d, c) = &mut *state.borrow_mut();
+                    match d.sample(&medium, c, &mut sampler, &mut Counters::default()) {
+                        (Some(t), _) => t as f64,
+                        (None, _) => -1.0,
+                    }
+                })
+                .collect();
+            let edges: Vec<f64> = (0..=32).map(|i| t_max as f64 * i as f64 / 32.0).collect();
+            chi2_1d(&samples, &pdf, &edges, &[(-1.0, pass)])
+                .assert_pass(1e-3, &format!("{text}, alpha {alpha}"));
+        }
+    }
+}
+
+fn infinite_glow(albedo: f32) -> Scene {
+    scene(&format!(
+        r#"
+medium = "glow"
+
+[camera]
+origin = [0, 0, 0]
+target = [0, 0, 1]
+fov = 30
+resolution = [4, 4]
+
+[media.glow]
+type = "homogeneous"
+sigma_t = 2
+albedo = {albedo}
+emission = 3
+"#
+    ))
+}
+
+#[test]
+fn analytic_cache_gives_zero_variance() {
+    // In an infinite homogeneous emitting medium L = L_e everywhere; with L_i = L_s = L_e as
+    // the cache, the guided walk must return exactly L_e on every sample.
+    for albedo in [0.2f32, 0.5, 0.9] {
+        let s = infinite_glow(albedo);
+        let guide = Components { directions: true, distances: true, roulette: true };
+        let settings = WalkSettings { max_depth: None, rr_depth: 5, guide, alpha: 0.5 };
+        let mut cache = Analytic::constant(3.0);
+        let mut spread = MeanEstimate::default();
+        for i in 0..2000 {
+            let mut sampler = Sampler::new(1, 0, i);
+            let ray = s.camera.ray(sampler.next_2d() * 4.0);
+            let mut ctx = WalkContext { cache: &mut cache, pixel: Some(3.0), recorder: None };
+            let l = walk::radiance(
+                &settings,
+                &s,
+                ray,
+                s.camera_medium,
+                &mut ctx,
+                &mut sampler,
+                &mut Counters::default(),
+            );
+            for c in l.to_array() {
+                assert!((c - 3.0).abs() < 1e-4, "albedo {albedo}: sample {i} returned {l}");
+            }
+            spread.push(l.x as f64);
+        }
+        assert!(spread.std_error() < 1e-6);
+        // The unguided walk on the same scene is not zero-variance, so the check above can fail.
+        let unguided = WalkSettings { guide: Components::OFF, ..settings };
+        let mut other = MeanEstimate::default();
+        for i in 0..2000 {
+            let mut sampler = Sampler::new(1, 0, i);
+            let ray = s.camera.ray(sampler.next_2d() * 4.0);
+            let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None };
+            let l = walk::radiance(
+                &unguided,
+                &s,
+                ray,
+                s.camera_medium,
+                &mut ctx,
+                &mut sampler,
+                &mut Counters::default(),
+            );
+            other.push(l.x as f64);
+        }
+        assert!(other.std_error() > 1e-3, "albedo {albedo}: unguided spread {:?}", other);
+        other.assert_matches(3.0, 4.5, "unguided glow");
+    }
+}
+
+#[test]
+fn splitting_survives_a_cache_wrong_by_a_thousand() {
+    let s = scene(
+        r#"
+[camera]
+origin = [0, 0, 4]
+target = [0, 0, 0]
+fov = 20
+resolution = [8, 8]
+
+[media.m]
+type = "homogeneous"
+sigma_t = 3
+albedo = 1
+phase = { type = "hg", g = 0.5 }
+
+[[shapes]]
+type = "sphere"
+bsdf = { type = "null" }
+interior = "m"
+
+[[lights]]
+type = "constant"
+radiance = 1
+"#,
+    );
+    let guide = Components { directions: false, distances: true, roulette: true };
+    let settings = WalkSettings { max_depth: None, rr_depth: 5, guide, alpha: 0.5 };
+    for scale in [1e-3f32, 1.0, 1e3] {
+        let mut cache = Analytic { scale, ..Analytic::constant(1.0) };
+        let mut counters = Counters::default();
+        let mut est = MeanEstimate::default();
+        let n = 20_000;
+        for i in 0..n {
+            let mut sampler = Sampler::new(2, 0, i);
+            let ray = s.camera.ray(sampler.next_2d() * 8.0);
+            let walks_before = counters.walks;
+            let mut ctx = WalkContext { cache: &mut cache, pixel: Some(1.0), recorder: None };
+            let l = walk::radiance(
+                &settings,
+                &s,
+                ray,
+                s.camera_medium,
+                &mut ctx,
+                &mut sampler,
+                &mut counters,
+            );
+            assert!(l.is_finite(), "cache x{scale}: sample {i} is {l}");
+            let made = counters.walks - walks_before;
+            assert!(
+                made <= walk::MAX_WALKS as u64,
+                "cache x{scale}: runaway splitting: {made} walks"
+            );
+            est.push(l.x as f64);
+        }
+        est.assert_matches(1.0, 4.5, &format!("furnace with a cache wrong by x{scale}"));
+        let factor = counters.walks as f64 / n as f64;
+        eprintln!("cache x{scale}: {factor:.2} walks per camera path");
+    }
+}
+
+/// Mean luminance of the four quadrants with their standard errors.
+fn quadrants(f: &Film) -> [MeanEstimate; 4] {
+    let mut q: [MeanEstimate; 4] = Default::default();
+    let (w, h) = (f.width as usize, f.height as usize);
+    // Per quadrant: the mean of pixel means, with the variance of the pixel means summed.
+    let mut var = [0.0f64; 4];
+    let mut sums = [0.0f64; 4];
+    let mut counts = [0usize; 4];
+    for (i, p) in f.pixels.iter().enumerate() {
+        let k = (i % w >= w / 2) as usize + 2 * (i / w >= h / 2) as usize;
+        let n = p.count as f64;
+        let m = luminance(glam::Vec3A::from_array(p.mean())) as f64;
+        sums[k] += m;
+        var[k] += ((p.lum_sq / n - m * m).max(0.0)) / (n - 1.0);
+        counts[k] += 1;
+    }
+    for k in 0..4 {
+        let c = counts[k] as f64;
+        // A MeanEstimate from two points with the right mean and standard error.
+        let (mean, se) = (sums[k] / c, (var[k]).sqrt() / c);
+        q[k].push(mean - se / std::f64::consts::SQRT_2);
+        q[k].push(mean + se / std::f64::consts::SQRT_2);
+    }
+    q
+}
+
+fn z(a: &MeanEstimate, b: &MeanEstimate) -> f64 {
+    // Each was built from two points holding mean +- se / sqrt 2: std_error() is se / sqrt 2.
+    let (sa, sb) =
+        (a.std_error() * std::f64::consts::SQRT_2, b.std_error() * std::f64::consts::SQRT_2);
+    (a.mean - b.mean) / (sa * sa + sb * sb).sqrt()
+}
+
+const FOG: &str = r#"
+[camera]
+origin = [0, 1.2, 4]
+target = [0, 0.8, 0]
+fov = 40
+resolution = [12, 10]
+
+[media.fog]
+type = "homogeneous"
+sigma_t = 1.2
+albedo = 0.9
+phase = { type = "hg", g = 0.4 }
+
+[[shapes]]
+type = "sphere"
+center = [0, 1, 0]
+bsdf = { type = "null" }
+interior = "fog"
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 4 }]
+
+[[lights]]
+type = "point"
+position = [1.5, 2.5, 1]
+intensity = 15
+"#;
+
+const CLOUD: &str = r#"
+[camera]
+origin = [0, 0.5, 4]
+target = [0, 0.5, 0]
+fov = 40
+resolution = [12, 10]
+
+[media.cloud]
+type = "noise"
+scale = 8
+albedo = 0.95
+phase = { type = "hg", g = 0.6 }
+transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }, { translate = [0, 0.5, 0] }]
+
+[[shapes]]
+type = "cube"
+transform = [{ translate = [0, 0.5, 0] }]
+bsdf = { type = "null" }
+interior = "cloud"
+
+[[lights]]
+type = "directional"
+direction = [-0.3, -1, -0.4]
+irradiance = 2
+angular_diameter = 2
+
+[[lights]]
+type = "constant"
+radiance = 0.2
+"#;
+
+const CHROMATIC: &str = r#"
+[camera]
+origin = [2, 1.5, 3.5]
+target = [0, 0.5, 0]
+fov = 40
+resolution = [12, 10]
+
+[media.dye]
+type = "homogeneous"
+sigma_t = [0.5, 1.5, 4]
+albedo = [0.95, 0.8, 0.6]
+
+[[shapes]]
+type = "cube"
+transform = [{ scale = 0.6 }, { translate = [0, 0.6, 0] }]
+bsdf = { type = "null" }
+interior = "dye"
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 4 }]
+
+[[lights]]
+type = "directional"
+direction = [-0.4, -1, -0.3]
+irradiance = 2
+angular_diameter = 1
+
+[[lights]]
+type = "constant"
+radiance = 0.2
+"#;
+
+fn render_with(s: &Scene, components: Components, alpha: f32, spp: u32, seed: u64) -> Film {
+    let guiding = GuidingOptions {
+        components,
+        alpha,
+        train: TrainBudget::Passes(4),
+        ..GuidingOptions::default()
+    };
+    let options = RenderOptions { budget: Budget::Samples(spp), seed, threads: None, guiding };
+    let r = render(s, &options, &|_, _| {}).unwrap();
+    assert_eq!(r.counters.invalid_samples, 0);
+    r.film
+}
+
+#[test]
+fn every_guided_component_converges_to_the_unguided_image() {
+    let mut worst = 0.0f64;
+    for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
+        let s = scene(text);
+        let reference = quadrants(&render_with(&s, Components::OFF, 0.0, 1024, 100));
+        let sets = [
+            (
+                "directions+distances",
+                Components { directions: true, distances: true, roulette: false },
+            ),
+            ("distances+rr", Components { directions: false, distances: true, roulette: true }),
+            ("directions+rr", Components { directions: true, distances: false, roulette: true }),
+            ("directions", Components { directions: true, ..Components::OFF }),
+            ("distances", Components { distances: true, ..Components::OFF }),
+            ("rr", Components { roulette: true, ..Components::OFF }),
+            ("full", Components::FULL),
+        ];
+        for (what, c) in sets {
+            for alpha in [0.1f32, 0.5, 1.0] {
+                let q = quadrants(&render_with(&s, c, alpha, 256, 7));
+                for k in 0..4 {
+                    let zk = z(&q[k], &reference[k]);
+                    worst = worst.max(zk.abs());
+                    assert!(
+                        zk.abs() < 4.5,
+                        "{name}, {what}, alpha {alpha}, quadrant {k}: {} vs unguided {} (z = {zk:.2})",
+                        q[k].mean,
+                        reference[k].mean
+                    );
+                }
+            }
+        }
+    }
+    eprintln!("largest |z| of guided against unguided: {worst:.2}");
+}
