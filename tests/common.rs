@@ -56,3 +56,34 @@ pub(crate) fn estimate_region(
 pub(crate) fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
 }
+
+/// Mean luminance of each quadrant of a film with its standard error, from the per-pixel
+/// sample variances.
+pub(crate) fn quadrant_means(f: &zerovar::film::Film) -> [(f64, f64); 4] {
+    let (w, h) = (f.width as usize, f.height as usize);
+    let (mut sum, mut var, mut count) = ([0.0f64; 4], [0.0f64; 4], [0usize; 4]);
+    for (i, p) in f.pixels.iter().enumerate() {
+        let k = (i % w >= w / 2) as usize + 2 * (i / w >= h / 2) as usize;
+        let n = p.count as f64;
+        let m = zerovar::math::luminance(glam::Vec3A::from_array(p.mean())) as f64;
+        sum[k] += m;
+        var[k] += (p.lum_sq / n - m * m).max(0.0) / (n - 1.0);
+        count[k] += 1;
+    }
+    std::array::from_fn(|k| (sum[k] / count[k] as f64, var[k].sqrt() / count[k] as f64))
+}
+
+/// Asserts that two renders agree quadrant by quadrant within `z_max` standard errors.
+pub(crate) fn assert_same_image(
+    a: &zerovar::film::Film,
+    b: &zerovar::film::Film,
+    z_max: f64,
+    what: &str,
+) {
+    for (k, ((ma, sa), (mb, sb))) in
+        quadrant_means(a).into_iter().zip(quadrant_means(b)).enumerate()
+    {
+        let z = (ma - mb) / (sa * sa + sb * sb).sqrt();
+        assert!(z.abs() < z_max, "{what}: quadrant {k}: {ma} +- {sa} vs {mb} +- {sb} (z = {z:.2})");
+    }
+}

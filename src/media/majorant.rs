@@ -80,6 +80,15 @@ impl MajorantGrid {
             DensityField::Noise(n) => {
                 Self::from_fn([NOISE_CELLS; 3], |lo, hi| noise_bounds(n, lo, hi))
             }
+            DensityField::Custom(f) => {
+                let top = f.max_density();
+                Self::from_fn([NOISE_CELLS; 3], |lo, hi| {
+                    let (a, b) = f.bounds(lo, hi);
+                    // A local bound may not exceed the global one, nor the control the majorant.
+                    let b = b.min(top).max(0.0);
+                    (a.clamp(0.0, b), b)
+                })
+            }
         }
     }
 

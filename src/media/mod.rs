@@ -31,6 +31,26 @@ pub struct Coefficients {
     pub albedo: Spectrum,
 }
 
+/// A density supplied by the embedding application, for example from its own simulation:
+/// zerovar derives majorants from its bounds and tracks through it like any grid.
+///
+/// The bounds are promises: the analog trackers (`delta`, `decomposition`, spectral) are
+/// unbiased only if `density` never exceeds them; the weighted trackers
+/// (`TrackerChoice::WeightedDelta`, `WeightedDecomposition`) stay unbiased when they are
+/// violated, at a cost in variance.
+pub trait DensityFunction: Send + Sync + std::fmt::Debug {
+    /// The density at a point of the unit cube: finite and non-negative.
+    fn density(&self, p: Vec3A) -> f32;
+    /// An upper bound of the density over the whole unit cube.
+    fn max_density(&self) -> f32;
+    /// Lower and upper bounds of the density over the box `[lo, hi]` of the unit cube, for
+    /// local majorants and decomposition controls; by default `(0, max_density())`.
+    fn bounds(&self, lo: Vec3A, hi: Vec3A) -> (f32, f32) {
+        let _ = (lo, hi);
+        (0.0, self.max_density())
+    }
+}
+
 /// A scalar density field over the unit cube.
 #[derive(Clone, Debug)]
 pub enum DensityField {
@@ -38,6 +58,8 @@ pub enum DensityField {
     Grid(Grid),
     /// The procedural noise cloud.
     Noise(NoiseCloud),
+    /// A density function of the embedding application.
+    Custom(std::sync::Arc<dyn DensityFunction>),
 }
 
 impl DensityField {
@@ -47,6 +69,7 @@ impl DensityField {
         match self {
             DensityField::Grid(g) => g.scalar(p),
             DensityField::Noise(n) => n.density(p),
+            DensityField::Custom(f) => f.density(p),
         }
     }
 
@@ -55,6 +78,7 @@ impl DensityField {
         match self {
             DensityField::Grid(g) => g.max_value(),
             DensityField::Noise(_) => 1.0,
+            DensityField::Custom(f) => f.max_density(),
         }
     }
 }

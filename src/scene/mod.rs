@@ -56,6 +56,14 @@ pub enum SceneError {
         /// What is wrong and how to fix it.
         message: String,
     },
+    /// Code asked for a medium the scene does not have.
+    #[error("no medium named `{name}`; the scene's media are: {known}")]
+    UnknownMedium {
+        /// The name asked for.
+        name: String,
+        /// The scene's media.
+        known: String,
+    },
     /// A `-D` override names no default.
     #[error("-D {key}: no such default; {message}")]
     Define {
@@ -163,6 +171,22 @@ pub fn load_str(
 }
 
 impl Scene {
+    /// Replaces the medium named `name` (keeping the name), for media built in code such as a
+    /// `DensityField::Custom`; every medium's tracker is chosen again automatically.
+    pub fn replace_medium(&mut self, name: &str, mut medium: Medium) -> Result<(), SceneError> {
+        let Some(i) = self.media.iter().position(|m| m.name == name) else {
+            let known: Vec<&str> = self.media.iter().map(|m| m.name.as_str()).collect();
+            return Err(SceneError::UnknownMedium {
+                name: name.to_string(),
+                known: known.join(", "),
+            });
+        };
+        medium.name = name.to_string();
+        self.media[i] = medium;
+        self.trackers = self.media.iter().map(Tracker::for_medium).collect();
+        Ok(())
+    }
+
     /// The closest surface hit along `ray` within `(0, t_max)`.
     #[inline]
     pub fn intersect(&self, ray: &Ray, t_max: f32) -> Option<SurfaceHit> {

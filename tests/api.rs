@@ -1,0 +1,106 @@
+//! The library as an embedding application uses it: media supplied in code.
+
+use crate::common::{assert_same_image, scene};
+use glam::{Vec3, Vec3A};
+use std::sync::Arc;
+use zerovar::math::Spectrum;
+use zerovar::media::{
+    AlbedoField, DensityField, DensityFunction, Grid, Heterogeneous, Medium, MediumKind, VolGrid,
+};
+use zerovar::phase::PhaseFunction;
+use zerovar::render::{Budget, RenderOptions, render};
+use zerovar::transform::Transform;
+
+const SCENE: &str = r#"
+[camera]
+origin = [0, 0.5, 3.5]
+target = [0, 0, 0]
+fov = 40
+resolution = [16, 12]
+
+[media.m]
+type = "homogeneous"
+
+[[shapes]]
+type = "cube"
+bsdf = { type = "null" }
+interior = "m"
+
+[[lights]]
+type = "directional"
+direction = [-0.3, -1, -0.5]
+irradiance = 2
+angular_diameter = 1
+
+[[lights]]
+type = "constant"
+radiance = 0.3
+"#;
+
+/// A host density that is the grid's own trilinear lookup, with only a global bound.
+#[derive(Debug)]
+struct Host(Grid);
+
+impl DensityFunction for Host {
+    fn density(&self, p: Vec3A) -> f32 {
+        self.0.scalar(p)
+    }
+    fn max_density(&self) -> f32 {
+        self.0.max_value()
+    }
+}
+
+fn grid() -> Grid {
+    let data = (0..6 * 5 * 4).map(|i| ((i * 37 % 11) as f32 / 10.0).powi(2)).collect();
+    Grid::new(VolGrid { resolution: [6, 5, 4], channels: 1, data })
+}
+
+fn medium(density: DensityField) -> Medium {
+    let to_world =
+        Transform::scale(Vec3::splat(2.0)).unwrap().then(&Transform::translate(Vec3::splat(-1.0)));
+    let h = Heterogeneous::new(
+        to_world,
+        density,
+        6.0,
+        Spectrum::ONE,
+        AlbedoField::Constant(Spectrum::splat(0.9)),
+    );
+    Medium {
+        name: "ignored".into(),
+        kind: MediumKind::Heterogeneous(Box::new(h)),
+        phase: PhaseFunction::HenyeyGreenstein { g: 0.4 },
+        emission: Spectrum::ZERO,
+    }
+}
+
+#[test]
+fn a_host_density_renders_like_the_same_grid() {
+    let mut as_grid = scene(SCENE);
+    as_grid.replace_medium("m", medium(DensityField::Grid(grid()))).unwrap();
+    let mut as_host = scene(SCENE);
+    as_host.replace_medium("m", medium(DensityField::Custom(Arc::new(Host(grid()))))).unwrap();
+    assert_eq!(as_host.media[0].name, "m");
+    let a =
+        render(&as_grid, &RenderOptions::unguided(Budget::Samples(512), 1), &|_, _| {}).unwrap();
+    let b =
+        render(&as_host, &RenderOptions::unguided(Budget::Samples(512), 2), &|_, _| {}).unwrap();
+    assert_same_image(&a.film, &b.film, 4.5, "host density against grid");
+    // The comparison can fail: a different density is told apart.
+    let mut other = scene(SCENE);
+    other
+        .replace_medium(
+            "m",
+            medium(DensityField::Custom(Arc::new(Host(Grid::new(VolGrid {
+                resolution: [1, 1, 1],
+                channels: 1,
+                data: vec![0.1],
+            }))))),
+        )
+        .unwrap();
+    let c = render(&other, &RenderOptions::unguided(Budget::Samples(512), 3), &|_, _| {}).unwrap();
+    let differs =
+        std::panic::catch_unwind(|| assert_same_image(&a.film, &c.film, 4.5, "different")).is_err();
+    assert!(differs, "a much thinner medium rendered the same image");
+    let err = as_grid.replace_medium("nope", medium(DensityField::Grid(grid()))).unwrap_err();
+    assert!(err.to_string().contains("nope") && err.to_string().contains("m"), "{err}");
+}
