@@ -10,6 +10,8 @@ pub struct PixelSum {
     pub rgb: [f64; 3],
     /// Sum of squared luminance.
     pub lum_sq: f64,
+    /// Sum of squared RGB samples.
+    pub rgb_sq: [f64; 3],
     /// Number of samples.
     pub count: u32,
 }
@@ -18,8 +20,9 @@ impl PixelSum {
     /// Adds one sample.
     #[inline]
     pub fn add(&mut self, c: Spectrum) {
-        for (s, v) in self.rgb.iter_mut().zip(c.to_array()) {
-            *s += v as f64;
+        for (i, v) in c.to_array().into_iter().enumerate() {
+            self.rgb[i] += v as f64;
+            self.rgb_sq[i] += v as f64 * v as f64;
         }
         let l = luminance(c) as f64;
         self.lum_sq += l * l;
@@ -30,9 +33,23 @@ impl PixelSum {
     pub fn merge(&mut self, o: &PixelSum) {
         for i in 0..3 {
             self.rgb[i] += o.rgb[i];
+            self.rgb_sq[i] += o.rgb_sq[i];
         }
         self.lum_sq += o.lum_sq;
         self.count += o.count;
+    }
+
+    /// The standard error of the mean RGB (zero with fewer than two samples).
+    pub fn std_error(&self) -> [f32; 3] {
+        if self.count < 2 {
+            return [0.0; 3];
+        }
+        let n = self.count as f64;
+        std::array::from_fn(|i| {
+            let mean = self.rgb[i] / n;
+            let var = (self.rgb_sq[i] / n - mean * mean).max(0.0) * n / (n - 1.0);
+            (var / n).sqrt() as f32
+        })
     }
 
     /// The mean RGB.

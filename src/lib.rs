@@ -19,6 +19,7 @@
 pub mod accel;
 pub mod bsdf;
 pub mod camera;
+pub mod compare;
 pub mod distribution;
 pub mod film;
 pub mod guided;
@@ -26,6 +27,7 @@ pub mod integrators;
 pub mod lights;
 pub mod math;
 pub mod media;
+pub mod metrics;
 pub mod output;
 pub mod phase;
 pub mod render;

@@ -37,22 +37,60 @@ pub enum OutputError {
     },
 }
 
-/// Writes row-major RGB pixels as a 32-bit float EXR with `meta` as header attributes.
-pub fn write_exr(
+/// Reads the first RGB(A) layer of an EXR file as row-major pixels: (width, height, pixels).
+pub fn read_exr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), OutputError> {
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
+        |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.y() * *w + pos.x()] = [r, g, b],
+    )
+    .map_err(|e| OutputError::Exr { path: path.display().to_string(), message: e.to_string() })?;
+    let (w, pixels) = image.layer_data.channel_data.pixels;
+    Ok((w, pixels.len() / w.max(1), pixels))
+}
+
+/// Writes the mean image and, as a second layer named `stderr`, its per-pixel standard error.
+pub fn write_exr_with_error(
     path: &Path,
     width: u32,
     height: u32,
     pixels: &[[f32; 3]],
+    std_error: &[[f32; 3]],
     meta: &ImageMetadata,
 ) -> Result<(), OutputError> {
-    use exr::meta::attribute::{AttributeValue, Text};
     use exr::prelude::*;
     let w = width as usize;
-    let channels = SpecificChannels::rgb(|p: Vec2<usize>| {
-        let c = pixels[p.y() * w + p.x()];
-        (c[0], c[1], c[2])
-    });
-    let mut attributes = LayerAttributes::named("rgb");
+    let size = (w, height as usize);
+    let mean = Layer::new(
+        size,
+        layer_attributes("rgb", meta),
+        Encoding::SMALL_LOSSLESS,
+        SpecificChannels::rgb(|p: Vec2<usize>| {
+            let c = pixels[p.y() * w + p.x()];
+            (c[0], c[1], c[2])
+        }),
+    );
+    let error = Layer::new(
+        size,
+        LayerAttributes::named("stderr"),
+        Encoding::SMALL_LOSSLESS,
+        SpecificChannels::rgb(|p: Vec2<usize>| {
+            let c = std_error[p.y() * w + p.x()];
+            (c[0], c[1], c[2])
+        }),
+    );
+    let attributes = ImageAttributes::new(IntegerBounds::from_dimensions(size));
+    Image::empty(attributes)
+        .with_layer(mean)
+        .with_layer(error)
+        .write()
+        .to_file(path)
+        .map_err(|e| OutputError::Exr { path: path.display().to_string(), message: e.to_string() })
+}
+
+fn layer_attributes(name: &str, meta: &ImageMetadata) -> exr::meta::header::LayerAttributes {
+    use exr::meta::attribute::{AttributeValue, Text};
+    let mut attributes = exr::meta::header::LayerAttributes::named(name);
     attributes.software_name =
         Some(Text::from(format!("zerovar {}", env!("CARGO_PKG_VERSION")).as_str()));
     let mut text = |k: &str, v: String| {
@@ -62,6 +100,24 @@ pub fn write_exr(
     text("zerovar.seconds", format!("{:.3}", meta.seconds));
     text("zerovar.seed", meta.seed.to_string());
     text("zerovar.scene", meta.scene.clone());
+    attributes
+}
+
+/// Writes row-major RGB pixels as a 32-bit float EXR with `meta` as header attributes.
+pub fn write_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    pixels: &[[f32; 3]],
+    meta: &ImageMetadata,
+) -> Result<(), OutputError> {
+    use exr::prelude::*;
+    let w = width as usize;
+    let channels = SpecificChannels::rgb(|p: Vec2<usize>| {
+        let c = pixels[p.y() * w + p.x()];
+        (c[0], c[1], c[2])
+    });
+    let attributes = layer_attributes("rgb", meta);
     let layer = Layer::new((w, height as usize), attributes, Encoding::SMALL_LOSSLESS, channels);
     Image::from_layer(layer)
         .write()

@@ -240,3 +240,85 @@ fn trains_a_field_and_renders_with_it() {
         assert!(!o.status.success() && stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
     }
 }
+
+#[test]
+fn reference_and_compare_end_to_end() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let scene = write("cmp.toml", GOOD);
+    let s = scene.to_str().unwrap();
+    let dir = temp_dir().join("cmp");
+    let reference = temp_dir().join("cmp-ref.exr");
+    let r = reference.to_str().unwrap();
+    let o = zerovar(&["reference", s, "-o", r, "--spp", "64", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let d = dir.to_str().unwrap();
+    let o = zerovar(&[
+        "compare",
+        s,
+        "--reference",
+        r,
+        "--spp",
+        "8",
+        "--out",
+        d,
+        "--method",
+        "a=guiding:off",
+        "--method",
+        "b=guiding:off",
+        "--method",
+        "g=guiding:full,alpha:0.5,train-passes:2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "results.md",
+        "results.csv",
+        "results.json",
+        "a.exr",
+        "a.png",
+        "a-error.png",
+        "g.exr",
+        "strip.png",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let (a, b) = (&json[0], &json[1]);
+    assert_eq!(a["checkpoints"].as_array().unwrap().len(), 4);
+    // The same method twice: the same image, so the same error; the speed-up is a timing ratio.
+    assert_eq!(
+        a["checkpoints"][3]["error"]["rel_mse"]["all"],
+        b["checkpoints"][3]["error"]["rel_mse"]["all"]
+    );
+    let speedup = b["speedup"].as_f64().unwrap();
+    assert!(speedup > 0.25 && speedup < 4.0, "self speed-up {speedup}");
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(table.lines().count(), 5, "{table}");
+    assert!(table.lines().skip(2).all(|l| l.split('|').count() == 11), "{table}");
+    // Errors: a reference of another size, a missing one, an unknown option.
+    let small = write("cmp-small.toml", GOOD.replace("resolution = [8, 6]", "resolution = [4, 3]"));
+    let o =
+        zerovar(&["compare", small.to_str().unwrap(), "--reference", r, "--spp", "1", "--out", d]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("8x6") && stderr(&o).contains("4x3"),
+        "{}",
+        stderr(&o)
+    );
+    let o =
+        zerovar(&["compare", s, "--reference", "/nonexistent/ref.exr", "--spp", "1", "--out", d]);
+    assert!(!o.status.success() && stderr(&o).contains("/nonexistent/ref.exr"), "{}", stderr(&o));
+    let o = zerovar(&[
+        "compare",
+        s,
+        "--reference",
+        r,
+        "--spp",
+        "1",
+        "--out",
+        d,
+        "--method",
+        "x=speed:11",
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("unknown option `speed`"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"));
+}

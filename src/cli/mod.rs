@@ -33,6 +33,67 @@ enum CommandArgs {
     Check(CheckArgs),
     /// Train a guiding field on a scene and save it, for `render --field`.
     Train(TrainArgs),
+    /// Render a high-quality unguided reference with its per-pixel standard error.
+    Reference(ReferenceArgs),
+    /// Compare methods (sets of render options) at equal budget against a reference.
+    Compare(CompareArgs),
+}
+
+#[derive(Args)]
+struct BudgetArgs {
+    /// Samples per pixel.
+    #[arg(long, conflicts_with = "time")]
+    spp: Option<u32>,
+    /// Seconds.
+    #[arg(long, allow_negative_numbers = true)]
+    time: Option<f64>,
+}
+
+#[derive(Args)]
+struct ReferenceArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// Output EXR (a second layer `stderr` holds the standard error).
+    #[arg(short, long)]
+    output: PathBuf,
+    #[command(flatten)]
+    budget: BudgetArgs,
+    /// Seed [default: the scene's seed + 1000003, independent of renders with the scene's seed].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bar.
+    #[arg(short, long)]
+    quiet: bool,
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    #[command(flatten)]
+    scene: SceneArgs,
+    /// The reference EXR (from `zerovar reference`).
+    #[arg(long)]
+    reference: PathBuf,
+    #[command(flatten)]
+    budget: BudgetArgs,
+    /// A method: NAME=key:value,... with keys guiding, alpha, train-passes, train-time, tracker
+    /// (repeatable) [default: unguided and guided=guiding:full].
+    #[arg(long, value_name = "NAME=OPTIONS")]
+    method: Vec<String>,
+    /// Directory for the tables and images.
+    #[arg(long, default_value = "compare")]
+    out: PathBuf,
+    /// Fraction of worst pixels dropped from each metric.
+    #[arg(long, default_value_t = 0.0)]
+    trim: f64,
+    /// Seed of the methods' renders [default: the scene's].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// Worker threads [default: all cores].
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(Args)]
@@ -161,7 +222,137 @@ pub(crate) fn run() -> Result<()> {
         }
         CommandArgs::Render(a) => run_render(validate(a)?),
         CommandArgs::Train(a) => run_train(a),
+        CommandArgs::Reference(a) => run_reference(a),
+        CommandArgs::Compare(a) => run_compare(a),
     }
+}
+
+fn validate_budget(b: &BudgetArgs, default_spp: u32) -> Result<Budget> {
+    match (b.spp, b.time) {
+        (Some(0), _) => bail!("--spp 0: give at least one sample per pixel"),
+        (Some(n), _) => Ok(Budget::Samples(n)),
+        (None, Some(t)) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
+            bail!("--time {t}: give a positive number of seconds")
+        }
+        (None, Some(t)) => Ok(Budget::Time(Duration::from_secs_f64(t))),
+        (None, None) => Ok(Budget::Samples(default_spp)),
+    }
+}
+
+fn run_reference(a: ReferenceArgs) -> Result<()> {
+    if a.threads == Some(0) {
+        bail!("--threads 0: give at least one thread, or leave it out to use every core");
+    }
+    if a.output.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref()
+        != Some("exr")
+    {
+        bail!("-o {}: the reference must be an .exr file", a.output.display());
+    }
+    let defines = parse_defines(&a.scene.define)?;
+    let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+    let budget = validate_budget(&a.budget, scene.settings.spp * 16)?;
+    let seed = a.seed.unwrap_or(scene.settings.seed.wrapping_add(1_000_003));
+    let options = RenderOptions { threads: a.threads, ..RenderOptions::unguided(budget, seed) };
+    let bar = progress_bar(!a.quiet && std::io::stderr().is_terminal());
+    let result = render(&scene, &options, &|done, total| {
+        bar.set_length(total);
+        bar.set_position(done);
+    })?;
+    bar.finish_and_clear();
+    let [w, h] = scene.camera.resolution;
+    let error: Vec<[f32; 3]> = result.film.pixels.iter().map(|p| p.std_error()).collect();
+    let meta = ImageMetadata {
+        spp: result.spp,
+        seconds: result.seconds,
+        seed,
+        scene: a.scene.scene.display().to_string(),
+    };
+    zerovar::output::write_exr_with_error(&a.output, w, h, &result.image, &error, &meta)?;
+    write_png(&a.output.with_extension("png"), w, h, &result.image, 0.0)?;
+    eprintln!("reference: {} spp in {:.1} s -> {}", result.spp, result.seconds, a.output.display());
+    Ok(())
+}
+
+fn run_compare(a: CompareArgs) -> Result<()> {
+    use zerovar::compare::{Method, csv, markdown, run};
+    if a.threads == Some(0) {
+        bail!("--threads 0: give at least one thread, or leave it out to use every core");
+    }
+    if !(0.0..0.5).contains(&a.trim) {
+        bail!("--trim {}: give a fraction in [0, 0.5)", a.trim);
+    }
+    let defines = parse_defines(&a.scene.define)?;
+    let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+    let budget = validate_budget(&a.budget, scene.settings.spp)?;
+    let base = RenderOptions {
+        threads: a.threads,
+        ..RenderOptions::unguided(budget, a.seed.unwrap_or(scene.settings.seed))
+    };
+    let methods = if a.method.is_empty() {
+        Method::defaults(&base)
+    } else {
+        a.method.iter().map(|m| Method::parse(m, &base)).collect::<Result<Vec<_>, _>>()?
+    };
+    let mut names = std::collections::HashSet::new();
+    if let Some(m) = methods.iter().find(|m| !names.insert(m.name.clone())) {
+        bail!("--method {}: two methods have this name", m.name);
+    }
+    let (rw, rh, reference) = zerovar::output::read_exr(&a.reference)?;
+    let [w, h] = scene.camera.resolution;
+    if (rw, rh) != (w as usize, h as usize) {
+        bail!(
+            "--reference {}: it is {rw}x{rh} but the scene renders {w}x{h}",
+            a.reference.display()
+        );
+    }
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
+    let results = run(&mut scene, &reference, &methods, budget, a.trim, &|m, c| {
+        eprintln!("{}: checkpoint {}/4", methods[m].name, c + 1);
+    })?;
+    let table = markdown(&results);
+    print!("{table}");
+    let write = |name: &str, text: String| -> Result<()> {
+        let path = a.out.join(name);
+        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))
+    };
+    write("results.md", table.clone())?;
+    write("results.csv", csv(&results))?;
+    write("results.json", serde_json::to_string_pretty(&results)? + "\n")?;
+    let mut strip = reference.clone();
+    let mut strip_w = w as usize;
+    for r in &results {
+        let meta = ImageMetadata {
+            spp: r.checkpoints.last().map_or(0, |c| c.spp),
+            seconds: r.checkpoints.last().map_or(0.0, |c| c.seconds),
+            seed: base.seed,
+            scene: a.scene.scene.display().to_string(),
+        };
+        write_exr(&a.out.join(format!("{}.exr", r.name)), w, h, &r.image, &meta)?;
+        write_png(&a.out.join(format!("{}.png", r.name)), w, h, &r.image, 0.0)?;
+        let err = zerovar::metrics::false_colour(&r.image, &reference);
+        write_png(&a.out.join(format!("{}-error.png", r.name)), w, h, &err, 0.0)?;
+        strip = side_by_side(&strip, strip_w, &r.image, w as usize, h as usize);
+        strip_w += w as usize;
+    }
+    write_png(&a.out.join("strip.png"), strip_w as u32, h, &strip, 0.0)?;
+    eprintln!("wrote {}", a.out.display());
+    Ok(())
+}
+
+/// Two row-major images of equal height placed left and right.
+fn side_by_side(
+    left: &[[f32; 3]],
+    lw: usize,
+    right: &[[f32; 3]],
+    rw: usize,
+    h: usize,
+) -> Vec<[f32; 3]> {
+    (0..h)
+        .flat_map(|y| {
+            left[y * lw..(y + 1) * lw].iter().chain(&right[y * rw..(y + 1) * rw]).copied()
+        })
+        .collect()
 }
 
 /// Validates guiding arguments; `default_full` makes `off` mean everything (for `train`).

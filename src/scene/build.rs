@@ -555,7 +555,8 @@ fn light(cx: &Ctx<'_>, d: &LightDesc) -> Result<Light> {
             }
             let to_world = cx.transform(&d.transform)?;
             let (w, h, pixels) =
-                read_exr(&file).or_else(|e| cx.err(format!("{}: {e}", file.display())))?;
+                crate::output::read_exr(&file).or_else(|e| cx.err(e.to_string()))?;
+            let pixels: Vec<Spectrum> = pixels.into_iter().map(Spectrum::from_array).collect();
             if let Some(i) = pixels.iter().position(|p| !p.is_finite() || p.min_element() < 0.0) {
                 return cx.err(format!(
                     "{}: pixel ({}, {}) is {:?}; radiance must be finite and non-negative",
@@ -576,19 +577,4 @@ fn light(cx: &Ctx<'_>, d: &LightDesc) -> Result<Light> {
              (area lights are `emitter` tables on shapes)"
         )),
     }
-}
-
-/// Reads the first RGB(A) layer of an EXR file as row-major pixels.
-pub(crate) fn read_exr(file: &Path) -> std::result::Result<(usize, usize, Vec<Spectrum>), String> {
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        file,
-        |res, _| (res.width(), vec![Spectrum::ZERO; res.width() * res.height()]),
-        |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            px[pos.y() * *w + pos.x()] = Spectrum::new(r, g, b)
-        },
-    )
-    .map_err(|e| e.to_string())?;
-    let (w, pixels) = image.layer_data.channel_data.pixels;
-    let h = pixels.len() / w.max(1);
-    Ok((w, h, pixels))
 }

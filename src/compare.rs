@@ -1,0 +1,288 @@
+//! `zerovar compare`: several methods (named sets of render options) on one scene with the
+//! same budget, training included in a guided method's time, their error against a
+//! reference at checkpoints, and tables (markdown, CSV, JSON) and images of the outcome.
+//!
+//! Checkpoints are separate renders at 1/8, 1/4, 1/2 and all of the budget with the same
+//! seed, so each point of a convergence curve is an honest equal-budget run.
+
+use crate::guided::Components;
+use crate::metrics::{ImageError, MetricsError, compare as measure};
+use crate::render::{Budget, RenderError, RenderOptions, TrainBudget, render};
+use crate::scene::Scene;
+use crate::tracking::TrackerChoice;
+use serde::Serialize;
+use std::time::Duration;
+
+/// A named set of render options.
+#[derive(Clone, Debug)]
+pub struct Method {
+    /// Its name in tables and file names.
+    pub name: String,
+    /// The options (the budget is the comparison's).
+    pub options: RenderOptions,
+    /// The tracker for every medium.
+    pub tracker: TrackerChoice,
+}
+
+/// Why a comparison cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum CompareError {
+    /// A `--method` specification does not parse.
+    #[error("--method {spec}: {why}")]
+    Method {
+        /// The specification.
+        spec: String,
+        /// What is wrong.
+        why: String,
+    },
+    /// A render failed.
+    #[error(transparent)]
+    Render(#[from] RenderError),
+    /// The reference does not fit.
+    #[error("reference: {0}")]
+    Metrics(#[from] MetricsError),
+    /// A method's tracker cannot apply to the scene.
+    #[error("method {method}: {message}")]
+    Tracker {
+        /// The method.
+        method: String,
+        /// The tracker error.
+        message: String,
+    },
+}
+
+impl Method {
+    /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
+    /// distances, rr, full or a +-list), `alpha`, `train-passes`, `train-time` (seconds),
+    /// `tracker` (a `--tracker` name). `NAME` alone means `base` unchanged.
+    pub fn parse(spec: &str, base: &RenderOptions) -> Result<Self, CompareError> {
+        let err = |why: String| CompareError::Method { spec: spec.to_string(), why };
+        let (name, rest) = spec.split_once('=').unwrap_or((spec, ""));
+        let name = name.trim();
+        if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || "-_".contains(c)) {
+            return Err(err("the name must be letters, digits, - or _ (it names files)".into()));
+        }
+        let mut m =
+            Method { name: name.to_string(), options: base.clone(), tracker: TrackerChoice::Auto };
+        for pair in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+            let Some((key, value)) = pair.split_once(':') else {
+                return Err(err(format!("`{pair}` is not key:value")));
+            };
+            let number = || {
+                value.parse::<f64>().map_err(|_| err(format!("{key}: `{value}` is not a number")))
+            };
+            match key {
+                "guiding" => {
+                    m.options.guiding.components = Components::parse(value)
+                        .ok_or_else(|| err(format!("guiding: unknown mode `{value}`")))?
+                }
+                "alpha" => {
+                    let a = number()?;
+                    if !(0.0..=1.0).contains(&a) {
+                        return Err(err(format!("alpha {a} must lie in [0, 1]")));
+                    }
+                    m.options.guiding.alpha = a as f32;
+                }
+                "train-passes" => {
+                    let n = number()?;
+                    if !(1.0..=20.0).contains(&n) || n.fract() != 0.0 {
+                        return Err(err(format!(
+                            "train-passes {n} must be a whole number from 1 to 20"
+                        )));
+                    }
+                    m.options.guiding.train = TrainBudget::Passes(n as u32);
+                }
+                "train-time" => {
+                    let t = number()?;
+                    if !(t > 0.0 && t < 1e7) {
+                        return Err(err(format!(
+                            "train-time {t} must be a positive number of seconds"
+                        )));
+                    }
+                    m.options.guiding.train = TrainBudget::Time(Duration::from_secs_f64(t));
+                }
+                "tracker" => {
+                    m.tracker = value.parse().map_err(|e| err(format!("tracker: {e}")))?;
+                }
+                _ => {
+                    return Err(err(format!(
+                        "unknown option `{key}`; use guiding, alpha, train-passes, train-time or tracker"
+                    )));
+                }
+            }
+        }
+        Ok(m)
+    }
+
+    /// The default methods: unguided, and guided with everything on.
+    pub fn defaults(base: &RenderOptions) -> Vec<Method> {
+        let mut guided = base.clone();
+        guided.guiding.components = Components::FULL;
+        vec![
+            Method {
+                name: "unguided".into(),
+                options: RenderOptions { guiding: Default::default(), ..base.clone() },
+                tracker: TrackerChoice::Auto,
+            },
+            Method { name: "guided".into(), options: guided, tracker: TrackerChoice::Auto },
+        ]
+    }
+}
+
+/// One point of a convergence curve.
+#[derive(Clone, Debug, Serialize)]
+pub struct Checkpoint {
+    /// Fraction of the budget.
+    pub fraction: f64,
+    /// Seconds in all, training included.
+    pub seconds: f64,
+    /// Samples per pixel of the render phase.
+    pub spp: u32,
+    /// Error against the reference.
+    pub error: ImageError,
+}
+
+/// The outcome of one method.
+#[derive(Clone, Debug, Serialize)]
+pub struct MethodResult {
+    /// The method's name.
+    pub name: String,
+    /// Convergence, the last point at the full budget.
+    pub checkpoints: Vec<Checkpoint>,
+    /// Efficiency 1 / (relMSE x seconds) at the full budget.
+    pub efficiency: f64,
+    /// Efficiency relative to the first method's.
+    pub speedup: f64,
+    /// The image at the full budget (not serialised).
+    #[serde(skip)]
+    pub image: Vec<[f32; 3]>,
+}
+
+/// Runs every method with `budget` on `scene` and measures it against `reference`.
+/// `progress(method index, fraction index)` reports as each checkpoint starts.
+pub fn run(
+    scene: &mut Scene,
+    reference: &[[f32; 3]],
+    methods: &[Method],
+    budget: Budget,
+    trim: f64,
+    progress: &dyn Fn(usize, usize),
+) -> Result<Vec<MethodResult>, CompareError> {
+    // Size and trim are checked before any rendering.
+    measure(reference, reference, trim)?;
+    let pixels = (scene.camera.resolution[0] * scene.camera.resolution[1]) as usize;
+    if pixels != reference.len() {
+        return Err(MetricsError::SizeMismatch { image: pixels, reference: reference.len() }.into());
+    }
+    let mut results = Vec::with_capacity(methods.len());
+    for (mi, m) in methods.iter().enumerate() {
+        scene.set_tracker(m.tracker).map_err(|e| CompareError::Tracker {
+            method: m.name.clone(),
+            message: e.to_string(),
+        })?;
+        let mut checkpoints = Vec::new();
+        let mut image = Vec::new();
+        for (ci, fraction) in [0.125, 0.25, 0.5, 1.0].into_iter().enumerate() {
+            progress(mi, ci);
+            let mut options = m.options.clone();
+            options.budget = scaled(budget, fraction, &mut options);
+            let r = render(scene, &options, &|_, _| {})?;
+            let seconds = r.seconds + r.training.as_ref().map_or(0.0, |t| t.seconds);
+            checkpoints.push(Checkpoint {
+                fraction,
+                seconds,
+                spp: r.spp,
+                error: measure(&r.image, reference, trim)?,
+            });
+            image = r.image;
+        }
+        let last = checkpoints.last().expect("four checkpoints");
+        let efficiency = 1.0 / (last.error.rel_mse.all * last.seconds).max(1e-300);
+        results.push(MethodResult {
+            name: m.name.clone(),
+            checkpoints,
+            efficiency,
+            speedup: 1.0,
+            image,
+        });
+    }
+    scene
+        .set_tracker(TrackerChoice::Auto)
+        .map_err(|e| CompareError::Tracker { method: "auto".into(), message: e.to_string() })?;
+    let base = results.first().map_or(1.0, |r| r.efficiency);
+    for r in &mut results {
+        r.speedup = r.efficiency / base;
+    }
+    Ok(results)
+}
+
+/// The budget for a checkpoint; a time budget includes a guided method's training, which
+/// gets a quarter of it unless the method says otherwise.
+fn scaled(budget: Budget, fraction: f64, options: &mut RenderOptions) -> Budget {
+    match budget {
+        Budget::Samples(n) => Budget::Samples(((n as f64 * fraction).round() as u32).max(1)),
+        Budget::Time(t) => {
+            let total = t.as_secs_f64() * fraction;
+            if !options.guiding.components.any() {
+                return Budget::Time(Duration::from_secs_f64(total));
+            }
+            let train = match options.guiding.train {
+                TrainBudget::Time(tt) => tt.as_secs_f64() * fraction,
+                TrainBudget::Passes(_) => total / 4.0,
+            };
+            options.guiding.train = TrainBudget::Time(Duration::from_secs_f64(train));
+            Budget::Time(Duration::from_secs_f64((total - train).max(total * 0.05)))
+        }
+    }
+}
+
+/// The results as a markdown table.
+pub fn markdown(results: &[MethodResult]) -> String {
+    let mut s = String::from(
+        "| method | seconds | spp | relMSE | MSE | MAPE | SMAPE | efficiency | speed-up |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in results {
+        let c = r.checkpoints.last().expect("checkpoints");
+        let e = &c.error;
+        s += &format!(
+            "| {} | {:.2} | {} | {:.4e} | {:.4e} | {:.4} | {:.4} | {:.4e} | {:.2} |\n",
+            r.name,
+            c.seconds,
+            c.spp,
+            e.rel_mse.all,
+            e.mse.all,
+            e.mape.all,
+            e.smape.all,
+            r.efficiency,
+            r.speedup
+        );
+    }
+    s
+}
+
+/// Every checkpoint of every method as CSV.
+pub fn csv(results: &[MethodResult]) -> String {
+    let mut s = String::from(
+        "method,fraction,seconds,spp,relmse,mse,mape,smape,relmse_r,relmse_g,relmse_b\n",
+    );
+    for r in results {
+        for c in &r.checkpoints {
+            let e = &c.error;
+            s += &format!(
+                "{},{},{:.4},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}\n",
+                r.name,
+                c.fraction,
+                c.seconds,
+                c.spp,
+                e.rel_mse.all,
+                e.mse.all,
+                e.mape.all,
+                e.smape.all,
+                e.rel_mse.rgb[0],
+                e.rel_mse.rgb[1],
+                e.rel_mse.rgb[2]
+            );
+        }
+    }
+    s
+}
