@@ -162,7 +162,8 @@ intensity = 1
 #[test]
 fn example_scenes_load() {
     let mut n = 0;
-    for entry in std::fs::read_dir(repo("scenes")).unwrap() {
+    let dirs = [repo("scenes"), repo("scenes/bench")];
+    for entry in dirs.iter().flat_map(|d| std::fs::read_dir(d).unwrap()) {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "toml") {
             let s = zerovar::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
@@ -170,5 +171,5 @@ fn example_scenes_load() {
             n += 1;
         }
     }
-    assert!(n >= 4, "expected the four example scenes, found {n}");
+    assert!(n >= 9, "expected the four example and five bench scenes, found {n}");
 }
