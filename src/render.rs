@@ -7,14 +7,14 @@
 //! only, never on the thread count or the tile schedule.
 
 use crate::film::{Film, PixelSum};
-use crate::guided::{Components, FieldCache, NoCache, RadianceCache};
+use crate::guided::{Components, DirectFluence, FieldCache, NoCache, RadianceCache};
 use crate::integrators::VolPath;
 use crate::integrators::walk::{self, WalkContext, WalkSettings};
 use crate::math::{Spectrum, is_finite, luminance};
 use crate::rng::{Sampler, mix64};
 use crate::scene::Scene;
 use crate::stats::Counters;
-use glam::Vec2;
+use glam::{Vec2, Vec3A};
 use rayon::prelude::*;
 use std::time::{Duration, Instant};
 use zerovar_guiding::{Field, FieldConfig, FieldStats, GuidingError, PathRecorder, Sample};
@@ -158,11 +158,11 @@ pub fn render(
                 None,
             ));
         }
-        let (field, films, report) = train_in_pool(scene, options, progress)?;
+        let (field, direct, films, report) = train_in_pool(scene, options, progress)?;
         Ok(final_phase(
             scene,
             options,
-            Some(&field),
+            Some((&field, Some(&direct))),
             Some(&films),
             films.clone(),
             threads,
@@ -180,7 +180,16 @@ pub fn render_with_field(
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<RenderResult, RenderError> {
     in_pool(options, |threads| {
-        Ok(final_phase(scene, options, Some(field), None, Vec::new(), threads, progress, None))
+        Ok(final_phase(
+            scene,
+            options,
+            Some((field, None)),
+            None,
+            Vec::new(),
+            threads,
+            progress,
+            None,
+        ))
     })
 }
 
@@ -190,7 +199,7 @@ pub fn train(
     options: &RenderOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
 ) -> Result<(Field, TrainingReport), RenderError> {
-    in_pool(options, |_| train_in_pool(scene, options, progress).map(|(f, _, r)| (f, r)))
+    in_pool(options, |_| train_in_pool(scene, options, progress).map(|(f, _, _, r)| (f, r)))
 }
 
 fn in_pool<T: Send>(
@@ -218,17 +227,19 @@ fn walk_settings(scene: &Scene, options: &RenderOptions) -> WalkSettings {
 }
 
 /// Training passes: 1, 2, 4, ... spp, each guided by the field so far, the field updated with
-/// its samples after each. Returns the field, the passes' films and a report.
+/// its samples after each. Returns the field, its direct fluence (from the last pass), the
+/// passes' films and a report.
 fn train_in_pool(
     scene: &Scene,
     options: &RenderOptions,
     progress: &(dyn Fn(u64, u64) + Sync),
-) -> Result<(Field, Vec<Film>, TrainingReport), RenderError> {
+) -> Result<(Field, DirectFluence, Vec<Film>, TrainingReport), RenderError> {
     let start = Instant::now();
     let mut field = Field::new(options.guiding.field.clone())?;
     let settings = walk_settings(scene, options);
     let [w, h] = scene.camera.resolution;
     let mut films = Vec::new();
+    let mut direct = DirectFluence::default();
     let (mut spp, mut samples_total) = (0u32, 0u64);
     let (passes, limit) = match options.guiding.train {
         TrainBudget::Passes(n) => (n, None),
@@ -245,19 +256,20 @@ fn train_in_pool(
         // Each pass draws from its own streams, independent of the render phase's.
         let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
         let pass_start = Instant::now();
-        let (_, samples) = render_pass(
+        let (_, samples, records) = render_pass(
             scene,
             &settings,
             seed,
             0,
             count,
             &mut film,
-            Some(&field),
+            Some((&field, Some(&direct))),
             estimate.as_deref(),
             true,
             &|_| {},
         );
         field.update(&samples)?;
+        direct = DirectFluence::build(&field, &records);
         samples_total += samples.len() as u64;
         spp += count;
         films.push(film);
@@ -279,7 +291,7 @@ fn train_in_pool(
         samples: samples_total,
         field: field.stats(),
     };
-    Ok((field, films, report))
+    Ok((field, direct, films, report))
 }
 
 /// Per-pixel luminance estimates from the training films: the mean over all their samples,
@@ -312,7 +324,7 @@ fn pixel_estimates(films: &[Film]) -> Option<Vec<f32>> {
 fn final_phase(
     scene: &Scene,
     options: &RenderOptions,
-    field: Option<&Field>,
+    field: Option<(&Field, Option<&DirectFluence>)>,
     training: Option<&[Film]>,
     training_films: Vec<Film>,
     threads: usize,
@@ -335,7 +347,7 @@ fn final_phase(
         Budget::Samples(spp) => {
             let total = spp as u64 * w as u64 * h as u64;
             let finished = std::sync::atomic::AtomicU64::new(0);
-            let (c, _) = render_pass(
+            let (c, _, _) = render_pass(
                 scene,
                 &settings,
                 options.seed,
@@ -358,7 +370,7 @@ fn final_phase(
             let mut batch = 1u32;
             loop {
                 let pass_start = Instant::now();
-                let (c, _) = render_pass(
+                let (c, _, _) = render_pass(
                     scene,
                     &settings,
                     options.seed,
@@ -441,7 +453,7 @@ fn combine_by_inverse_variance(training: &[Film], last: &Film) -> Vec<[f32; 3]> 
 }
 
 /// Adds samples `first .. first + count` of every pixel to `film`; returns the counters and,
-/// when `record`, the training samples in tile order.
+/// when `record`, the training samples and direct-fluence records in tile order.
 #[allow(clippy::too_many_arguments)]
 fn render_pass(
     scene: &Scene,
@@ -450,51 +462,61 @@ fn render_pass(
     first: u32,
     count: u32,
     film: &mut Film,
-    field: Option<&Field>,
+    field: Option<(&Field, Option<&DirectFluence>)>,
     estimate: Option<&[f32]>,
     record: bool,
     on_tile: &(dyn Fn(u64) + Sync),
-) -> (Counters, Vec<Sample>) {
+) -> (Counters, Vec<Sample>, Vec<(Vec3A, f32)>) {
     let [w, h] = scene.camera.resolution;
     let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE))
         .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty)))
         .collect();
-    let results: Vec<(Vec<PixelSum>, Counters, Vec<Sample>)> = tiles
+    type TileResult = ((Vec<PixelSum>, Counters, Vec<Sample>), Vec<(Vec3A, f32)>);
+    let results: Vec<TileResult> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
             let out = match field {
-                Some(f) => render_tile(
-                    scene,
-                    settings,
-                    seed,
-                    (tx, ty),
-                    first,
-                    count,
-                    &mut FieldCache::new(f),
-                    estimate,
-                    record,
-                ),
-                None => render_tile(
-                    scene,
-                    settings,
-                    seed,
-                    (tx, ty),
-                    first,
-                    count,
-                    &mut NoCache,
-                    estimate,
-                    record,
+                Some((f, direct)) => {
+                    let mut cache = FieldCache::with_direct(f, direct, record);
+                    let out = render_tile(
+                        scene,
+                        settings,
+                        seed,
+                        (tx, ty),
+                        first,
+                        count,
+                        &mut cache,
+                        estimate,
+                        record,
+                    );
+                    (out, cache.take_records())
+                }
+                None => (
+                    render_tile(
+                        scene,
+                        settings,
+                        seed,
+                        (tx, ty),
+                        first,
+                        count,
+                        &mut NoCache,
+                        estimate,
+                        record,
+                    ),
+                    Vec::new(),
                 ),
             };
-            on_tile(out.0.len() as u64 * count as u64);
+            on_tile(out.0.0.len() as u64 * count as u64);
             out
         })
         .collect();
     let mut counters = Counters::default();
     let mut samples = Vec::new();
-    for (&(tx, ty), (sums, c, s)) in tiles.iter().zip(results) {
+    let mut records = Vec::new();
+    for (&(tx, ty), ((sums, c, s), r)) in tiles.iter().zip(results) {
         counters += c;
         samples.extend(s);
+        records.extend(r);
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = (x0 + TILE).min(w) - x0;
         for (i, s) in sums.iter().enumerate() {
@@ -502,7 +524,7 @@ fn render_pass(
             film.pixels[(y * w + x) as usize].merge(s);
         }
     }
-    (counters, samples)
+    (counters, samples, records)
 }
 
 #[allow(clippy::too_many_arguments)]

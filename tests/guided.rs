@@ -7,7 +7,7 @@ use glam::{Vec2, Vec3A};
 use std::cell::RefCell;
 use zerovar::film::Film;
 use zerovar::guided::distance::GuidedDistance;
-use zerovar::guided::{Components, RadianceCache};
+use zerovar::guided::{Components, NoCache, RadianceCache};
 use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
 use zerovar::math::{Ray, luminance};
 use zerovar::media::Medium;
@@ -15,6 +15,7 @@ use zerovar::render::{Budget, GuidingOptions, RenderOptions, TrainBudget, render
 use zerovar::rng::Sampler;
 use zerovar::scene::Scene;
 use zerovar::stats::Counters;
+use zerovar_guiding::PathRecorder;
 use zerovar_testkit::{MeanEstimate, chi2_1d, integrate_1d};
 
 /// A cache with fixed estimates: `incident` and `inscattered` times a bright blob around
@@ -428,4 +429,47 @@ fn every_guided_component_converges_to_the_unguided_image() {
         }
     }
     eprintln!("largest |z| of guided against unguided: {worst:.2}");
+}
+
+#[test]
+fn training_continuations_learn_the_light_found_by_later_next_event_estimates() {
+    // The fog scene's only light is a point light: no continuation ever hits an emitter, so
+    // all a vertex's training sample can learn is what next-event estimation finds at later
+    // vertices. A field that never saw it knew only the direct light (lobes aimed at lights
+    // that next-event estimation already samples perfectly), and every direction it guided
+    // was wasted.
+    let s = scene(FOG);
+    let settings =
+        WalkSettings { max_depth: None, rr_depth: 5, guide: Components::OFF, alpha: 0.5 };
+    let mut recorder = PathRecorder::new();
+    let mut samples = Vec::new();
+    for i in 0..4000 {
+        let mut sampler = Sampler::new(3, 0, i);
+        let ray = s.camera.ray(sampler.next_2d() * Vec2::new(12.0, 10.0));
+        let mut ctx =
+            WalkContext { cache: &mut NoCache, pixel: None, recorder: Some(&mut recorder) };
+        let l = walk::radiance(
+            &settings,
+            &s,
+            ray,
+            s.camera_medium,
+            &mut ctx,
+            &mut sampler,
+            &mut Counters::default(),
+        );
+        assert!(l.is_finite());
+        recorder.finish(&mut samples);
+    }
+    // Samples of vertices with a successor: continuations (next-event samples have none).
+    let inner: Vec<_> = samples.iter().filter(|x| x.distance.is_finite()).collect();
+    let lit = inner.iter().filter(|x| x.radiance > 0.0).count();
+    assert!(inner.len() > 500, "only {} inner vertices", inner.len());
+    assert!(
+        lit * 4 > inner.len(),
+        "{lit} of {} continuation samples carry light found later",
+        inner.len()
+    );
+    // Direct light goes to the direct-fluence records, not to the field's samples: every
+    // sample is a continuation, with a phase or BSDF density, never a light's.
+    assert!(samples.iter().all(|x| x.pdf.is_finite() && x.pdf > 0.0));
 }

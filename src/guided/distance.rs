@@ -27,7 +27,7 @@ use crate::stats::Counters;
 use crate::tracking::{transmittance, transmittance_homogeneous};
 
 /// Segments along the guided stretch of a ray.
-const SEGMENTS: usize = 8;
+const SEGMENTS: usize = 4;
 /// The guided stretch ends where the standard transmittance falls to exp(-CUT); beyond it the
 /// rare remaining collisions follow the standard exponential.
 const CUT: f32 = 8.0;
@@ -135,26 +135,40 @@ impl GuidedDistance {
                 Segment { start: guided_end, length: b - guided_end, ..Default::default() };
             count += 1;
         }
-        for s in &mut segments[..count] {
-            // In log space relative to the largest, so deep segments do not underflow.
-            let log = Spectrum::select(
-                pick.cmpgt(Spectrum::ZERO),
-                ln(pick) - sigma * s.start,
-                Spectrum::splat(f32::NEG_INFINITY),
-            );
-            let top = log.max_element();
-            s.mass = exp(log - Spectrum::splat(top));
-            s.collide = if s.length.is_finite() {
-                Spectrum::select(
-                    sigma.cmpgt(Spectrum::ZERO),
-                    -exp_m1(-sigma * s.length),
-                    Spectrum::ZERO,
-                )
+        // Per channel, the mixture's mass at each segment's start, renormalised to a largest
+        // entry of 1 as it goes (so deep segments do not underflow), and the probability of
+        // colliding within a segment: the same for all equal segments, so one exponential per
+        // channel covers them.
+        let positive_sigma = sigma.cmpgt(Spectrum::ZERO);
+        let step_decay = exp(-sigma * step);
+        let step_collide = Spectrum::select(positive_sigma, -exp_m1(-sigma * step), Spectrum::ZERO);
+        let mut mass = Spectrum::select(pick.cmpgt(Spectrum::ZERO), pick, Spectrum::ZERO);
+        mass /= mass.max_element();
+        for (k, s) in segments[..count].iter_mut().enumerate() {
+            if k == SEGMENTS {
+                // The tail, from the cut on.
+                let log = Spectrum::select(
+                    pick.cmpgt(Spectrum::ZERO),
+                    ln(pick) - sigma * s.start,
+                    Spectrum::splat(f32::NEG_INFINITY),
+                );
+                mass = exp(log - Spectrum::splat(log.max_element()));
+            }
+            s.mass = mass;
+            s.collide = if k < SEGMENTS {
+                step_collide
+            } else if s.length.is_finite() {
+                Spectrum::select(positive_sigma, -exp_m1(-sigma * s.length), Spectrum::ZERO)
             } else {
-                Spectrum::select(sigma.cmpgt(Spectrum::ZERO), Spectrum::ONE, Spectrum::ZERO)
+                Spectrum::select(positive_sigma, Spectrum::ONE, Spectrum::ZERO)
             };
             s.p_std = s.mass.dot(s.collide) / s.mass.element_sum();
             s.p_guided = s.p_std;
+            mass *= step_decay;
+            let top = mass.max_element();
+            if top > 0.0 {
+                mass /= top;
+            }
         }
         Some(Self {
             ray: *ray,
@@ -183,16 +197,15 @@ impl GuidedDistance {
             return; // the tail follows the standard exponential
         }
         let mid = self.ray.at(s.start + 0.5 * s.length);
-        if !cache.load(mid, self.lookup_u) {
+        let Some((incident, mean)) = cache.estimates(mid, self.lookup_u, self.ray.direction) else {
             return;
-        }
+        };
         let c = medium.coefficients(mid);
         if matches!(medium.kind, MediumKind::Heterogeneous(_)) {
             counters.density_lookups += 1;
         }
         let sigma_t = luminance(c.sigma_t);
         let sigma_s = luminance(c.sigma_t * c.albedo);
-        let incident = cache.incident(self.ray.direction);
         if !(sigma_t > 0.0 && incident > 0.0) {
             // No collision expected here, or no light known to enter: keep the floor only.
             s.p_guided = MIN_RELATIVE * s.p_std;
@@ -200,7 +213,7 @@ impl GuidedDistance {
         }
         // The mean incident radiance stands for L_s: exact for isotropic scattering, close for
         // moderate g, and an order of magnitude cheaper than the HG convolution per segment.
-        let source = sigma_s * cache.mean_radiance() + (sigma_t - sigma_s).max(0.0) * self.emission;
+        let source = sigma_s * mean + (sigma_t - sigma_s).max(0.0) * self.emission;
         let collide = -(-sigma_t * s.length).exp_m1() / sigma_t;
         let raw = collide * source / incident;
         s.p_guided = if raw.is_finite() {
@@ -443,8 +456,8 @@ fn null_collision_flight(
     counters: &mut Counters,
 ) -> GuidedFlight {
     let emissive = medium.is_emissive();
-    // Cache estimates are refreshed every eighth of the stretch: regions are coarser than the
-    // spacing of tentative collisions, and a lookup costs far more than a density lookup.
+    // Cache estimates are refreshed every 1 / SEGMENTS of the stretch: regions are coarser than
+    // the spacing of tentative collisions, and a lookup costs far more than a density lookup.
     let refresh = (t1 - t0) / SEGMENTS as f32;
     let mut cached: Option<(f32, f32, f32)> = None; // (t of lookup, L_s, L)
     let mut weight = Spectrum::ONE;
@@ -473,9 +486,7 @@ fn null_collision_flight(
         let mut p_scatter = p_std;
         if alpha > 0.0 && ps > 0.0 && pn > 0.0 {
             if cached.is_none_or(|(at, _, _)| t - at > refresh) {
-                cached = cache
-                    .load(x, lookup_u)
-                    .then(|| (t, cache.mean_radiance(), cache.incident(ray.direction)));
+                cached = cache.estimates(x, lookup_u, ray.direction).map(|(li, ls)| (t, ls, li));
             }
             if let Some((_, ls, li)) = cached {
                 let (a, b) = (ps * ls, pn * li);

@@ -77,26 +77,113 @@ pub trait RadianceCache {
     fn sample(&self, u: Vec2) -> (Vec3A, f32);
     /// Density of the prepared product at `w`.
     fn pdf(&self, w: Vec3A) -> f32;
+    /// During training: the next-event estimate of the fluence at a recorded vertex `x`
+    /// (zero when it found nothing). The field learns only what the continuation brings
+    /// back; these complete its fluence for the adjoint (see [`DirectFluence`]).
+    fn record_direct(&mut self, _x: Vec3A, _fluence: f32) {}
+    /// `(incident(w), mean_radiance())` at `x`, or `None` where `load` would fail; may be
+    /// cheaper than `load` (no product state), and may leave the loaded point undefined.
+    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A) -> Option<(f32, f32)> {
+        self.load(x, u).then(|| (self.incident(w), self.mean_radiance()))
+    }
 }
+
+/// Smallest HG asymmetry `|g|` for which directions sample the product with the phase
+/// function rather than the incident radiance alone.
+pub const PRODUCT_MIN_G: f32 = 0.55;
 
 /// A trained guiding field as a radiance cache, with its per-thread query state.
 #[derive(Clone, Debug)]
 pub struct FieldCache<'a> {
     field: &'a Field,
     dist: VolumeDistribution,
+    /// Per region, the fluence next-event estimation brings (absent for a loaded field).
+    direct: Option<&'a DirectFluence>,
+    /// The loaded region's direct fluence.
+    direct_here: f32,
+    /// Direct-fluence records of training paths, when training.
+    records: Option<Vec<(Vec3A, f32)>>,
+    /// The last `estimates`: region, direction, incident and mean radiance.
+    memo: Option<(usize, Vec3A, f32, f32)>,
 }
 
 impl<'a> FieldCache<'a> {
-    /// A cache over `field`.
+    /// A cache over `field` alone: its adjoint misses the direct light that next-event
+    /// estimation collects (a field loaded from a file has no [`DirectFluence`]).
     pub fn new(field: &'a Field) -> Self {
-        Self { field, dist: VolumeDistribution::default() }
+        Self {
+            field,
+            dist: VolumeDistribution::default(),
+            direct: None,
+            direct_here: 0.0,
+            records: None,
+            memo: None,
+        }
+    }
+
+    /// A cache over `field` completed by the direct fluence of its regions; `record` keeps
+    /// the direct-fluence records of training paths for [`take_records`](Self::take_records).
+    pub fn with_direct(field: &'a Field, direct: Option<&'a DirectFluence>, record: bool) -> Self {
+        Self { direct, records: record.then(Vec::new), ..Self::new(field) }
+    }
+
+    /// The direct-fluence records gathered so far.
+    pub fn take_records(&mut self) -> Vec<(Vec3A, f32)> {
+        self.records.as_mut().map(std::mem::take).unwrap_or_default()
+    }
+
+    #[inline]
+    fn total_fluence(&self) -> f32 {
+        self.dist.fluence() + self.direct_here
+    }
+}
+
+/// Per region of a field, the mean next-event estimate of the fluence at its training
+/// vertices. The field learns the radiance the continuation (phase or BSDF sampling) brings
+/// back, MIS-weighted, because that is the integrand guided directions should follow: next
+/// event estimation already samples delta and small lights, and a field trained on them spends
+/// its lobes on directions where a continuation finds nothing new (a point light cannot be hit
+/// at all). The adjoint of roulette and distance sampling needs all the light, so it adds this
+/// table's value to the field's fluence.
+#[derive(Clone, Debug, Default)]
+pub struct DirectFluence {
+    values: Vec<f32>,
+}
+
+impl DirectFluence {
+    /// The mean of `records` (vertex, next-event fluence estimate) per region of `field`.
+    pub fn build(field: &Field, records: &[(Vec3A, f32)]) -> Self {
+        let n = field.regions().len();
+        let (mut sums, mut counts) = (vec![0.0f64; n], vec![0u64; n]);
+        for &(x, v) in records {
+            if let Some(i) = field.lookup_index(x.into(), 0.5) {
+                sums[i] += f64::from(v);
+                counts[i] += 1;
+            }
+        }
+        let values = sums
+            .iter()
+            .zip(&counts)
+            .map(|(&s, &c)| if c > 0 { (s / c as f64) as f32 } else { 0.0 })
+            .collect();
+        Self { values }
+    }
+
+    /// The direct fluence of region `index` (zero when unknown).
+    pub fn get(&self, index: usize) -> f32 {
+        self.values.get(index).copied().unwrap_or(0.0)
     }
 }
 
 impl RadianceCache for FieldCache<'_> {
     #[inline]
     fn load(&mut self, x: Vec3A, u: f32) -> bool {
-        self.dist.init(self.field, x.into(), u)
+        let ok = self.dist.init(self.field, x.into(), u);
+        self.direct_here = match (self.direct, self.dist.region_index()) {
+            (Some(d), Some(i)) if ok => d.get(i as usize),
+            _ => 0.0,
+        };
+        ok
     }
     #[inline]
     fn incident(&self, w: Vec3A) -> f32 {
@@ -104,20 +191,30 @@ impl RadianceCache for FieldCache<'_> {
     }
     #[inline]
     fn mean_radiance(&self) -> f32 {
-        self.dist.fluence() * crate::math::INV_FOUR_PI
+        self.total_fluence() * crate::math::INV_FOUR_PI
     }
     #[inline]
     fn inscattered(&self, w: Vec3A, g: f32) -> f32 {
-        self.dist.inscattered_radiance(w.into(), g)
+        // The direct part is taken as isotropic: the table keeps no directions.
+        self.dist.inscattered_radiance(w.into(), g) + self.direct_here * crate::math::INV_FOUR_PI
     }
     #[inline]
     fn product_hg(&mut self, ray_dir: Vec3A, g: f32) -> bool {
-        self.dist.apply_hg_product(ray_dir.into(), g);
+        // The product costs about a microsecond per vertex (4 HG lobes times the region's);
+        // for a phase function this close to isotropic the incident-radiance mixture alone
+        // is nearly proportional to it and halves the cost of a guided walk (measured).
+        if g.abs() < PRODUCT_MIN_G {
+            self.dist.clear_product();
+        } else {
+            self.dist.apply_hg_product(ray_dir.into(), g);
+        }
         true
     }
     #[inline]
-    fn product_cosine(&mut self, normal: Vec3A) -> bool {
-        self.dist.apply_cosine_product(normal.into());
+    fn product_cosine(&mut self, _normal: Vec3A) -> bool {
+        // The incident radiance alone: a surface region's samples lie in its hemisphere, and
+        // the cosine product's cost did not pay on the example scenes.
+        self.dist.clear_product();
         true
     }
     #[inline]
@@ -128,6 +225,30 @@ impl RadianceCache for FieldCache<'_> {
     #[inline]
     fn pdf(&self, w: Vec3A) -> f32 {
         self.dist.pdf(w.into())
+    }
+    #[inline]
+    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A) -> Option<(f32, f32)> {
+        // Straight from the region, without loading its mixture: a ray's segments mostly
+        // fall in one region, so the last answer is kept too.
+        let i = self.field.lookup_index(x.into(), u)?;
+        if let Some((j, v, li, lm)) = self.memo
+            && j == i
+            && v == w
+        {
+            return Some((li, lm));
+        }
+        let region = &self.field.regions()[i];
+        let direct = self.direct.map_or(0.0, |d| d.get(i));
+        let li = region.fluence() * region.mixture().pdf(w.into());
+        let lm = (region.fluence() + direct) * crate::math::INV_FOUR_PI;
+        self.memo = Some((i, w, li, lm));
+        Some((li, lm))
+    }
+    #[inline]
+    fn record_direct(&mut self, x: Vec3A, fluence: f32) {
+        if let Some(r) = &mut self.records {
+            r.push((x, fluence));
+        }
     }
 }
 

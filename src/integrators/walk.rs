@@ -173,20 +173,6 @@ fn walk<C: RadianceCache>(
                 let dir = s.ray.direction;
                 let g = phase.mean_cosine();
                 let loaded = guide.any() && ctx.cache.load(p, sampler.next_1d());
-                if window_rr && loaded {
-                    // After the distance decision: the path's expected worth is beta L_s.
-                    let q = window::factor(
-                        luminance(s.beta),
-                        ctx.cache.inscattered(dir, g),
-                        ctx.pixel.unwrap_or(0.0),
-                    );
-                    if q < 1.0 {
-                        if sampler.next_1d() >= q {
-                            break;
-                        }
-                        s.beta /= q;
-                    }
-                }
                 let product = guide.directions && loaded && ctx.cache.product_hg(dir, g);
                 let mix_pdf = |cache: &C, wi: Vec3A| {
                     let pp = phase.eval(dir, wi);
@@ -196,6 +182,8 @@ fn walk<C: RadianceCache>(
                     (Spectrum::splat(phase.eval(dir, wi)), mix_pdf(ctx.cache, wi))
                 });
                 l += s.beta * direct.contribution;
+                // Earlier vertices learn it (this one learns it in its direct fluence).
+                record_contribution(ctx, s.beta * direct.contribution);
                 let (wi, pdf) = if product && sampler.next_1d() < alpha {
                     let (wi, _) = ctx.cache.sample(sampler.next_2d());
                     (wi, mix_pdf(ctx.cache, wi))
@@ -211,7 +199,7 @@ fn walk<C: RadianceCache>(
                 s.ray = Ray::new(p, wi);
                 s.prev = Previous { position: p, pdf, delta: false };
                 nulls = 0;
-                let adjoint = if window_rr && loaded { ctx.cache.mean_radiance() } else { 0.0 };
+                let adjoint = if window_rr && loaded { adjoint(ctx.cache, wi) } else { 0.0 };
                 if !continue_path(settings, &mut s, adjoint, ctx, branches, sampler) {
                     break;
                 }
@@ -277,6 +265,7 @@ fn walk<C: RadianceCache>(
                 (bsdf.eval(wo, frame.to_local(wi), hit.uv), mix_pdf(ctx.cache, wi))
             });
             l += s.beta * direct.contribution;
+            record_contribution(ctx, s.beta * direct.contribution);
         }
         let u1 = sampler.next_1d();
         let (wi, weight, pdf, delta, eta) = if product && u1 < alpha {
@@ -314,7 +303,7 @@ fn walk<C: RadianceCache>(
         s.ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
         s.prev = Previous { position: hit.p, pdf, delta };
         nulls = 0;
-        let adjoint = if window_rr && loaded { ctx.cache.mean_radiance() } else { 0.0 };
+        let adjoint = if window_rr && loaded { adjoint(ctx.cache, wi) } else { 0.0 };
         if !continue_path(settings, &mut s, adjoint, ctx, branches, sampler) {
             break;
         }
@@ -369,6 +358,15 @@ fn continue_path<C>(
     true
 }
 
+/// What a path is expected to bring back after its direction `wi` was chosen at the loaded
+/// point, for the weight window: the incident radiance along `wi`, or the mean incident
+/// radiance (which includes the direct light next-event estimation collects) where that is
+/// larger. Survivors of roulette are weighted by `1 / q`, so an adjoint that underestimates
+/// makes fireflies while one that overestimates only splits more; hence the larger of the two.
+fn adjoint<C: RadianceCache>(cache: &C, wi: Vec3A) -> f32 {
+    cache.incident(wi).max(cache.mean_radiance())
+}
+
 /// MIS weight of an emitter found by the previous direction sample.
 #[inline]
 fn mis_emitter(scene: &Scene, prev: Previous, light_pdf: f32) -> f32 {
@@ -380,15 +378,17 @@ fn mis_emitter(scene: &Scene, prev: Previous, light_pdf: f32) -> f32 {
 #[derive(Clone, Copy)]
 struct DirectSample {
     contribution: Spectrum,
-    wi: Vec3A,
+    /// Density of the light sample, light selection included (for a delta light, the
+    /// selection probability alone).
     pdf: f32,
-    /// MIS-weighted radiance arriving from `wi`.
+    /// MIS-weighted radiance arriving from the light (luminance): `radiance / pdf` estimates
+    /// the fluence next-event estimation collects.
     radiance: f32,
 }
 
 impl DirectSample {
     const NONE: DirectSample =
-        DirectSample { contribution: Spectrum::ZERO, wi: Vec3A::Z, pdf: 0.0, radiance: 0.0 };
+        DirectSample { contribution: Spectrum::ZERO, pdf: 0.0, radiance: 0.0 };
 }
 
 /// Next-event estimation: one light chosen uniformly, a direction sampled on it, weighed
@@ -426,15 +426,12 @@ fn sample_light(
     let arriving = tr * ls.radiance * w;
     DirectSample {
         contribution: f * arriving / light_pdf,
-        wi: ls.wi,
-        // For a delta light radiance / pdf is its irradiance over the selection probability:
-        // the sample is a Dirac in the training data, which is what the field should learn.
         pdf: light_pdf,
         radiance: luminance(arriving),
     }
 }
 
-fn record_vertex<C>(
+fn record_vertex<C: RadianceCache>(
     ctx: &mut WalkContext<'_, C>,
     p: Vec3A,
     wi: Vec3A,
@@ -444,10 +441,11 @@ fn record_vertex<C>(
     direct: &DirectSample,
 ) {
     if let Some(r) = ctx.recorder.as_deref_mut() {
+        // The field learns what the continuation brings back; next-event estimates go to the
+        // cache's direct-fluence records instead (`guided::DirectFluence`).
         r.add_vertex(p.into(), wi.into(), pdf, luminance(beta), volume);
-        if direct.pdf > 0.0 && direct.radiance > 0.0 {
-            r.add_direct_sample(p.into(), direct.wi.into(), direct.pdf, direct.radiance, volume);
-        }
+        let fluence = if direct.pdf > 0.0 { direct.radiance / direct.pdf } else { 0.0 };
+        ctx.cache.record_direct(p, if fluence.is_finite() { fluence } else { 0.0 });
     }
 }
 
