@@ -91,7 +91,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         emission: Spectrum::ZERO,
     };
     scene.replace_medium("smoke", medium)?;
-    let result = render(&scene, &RenderOptions::unguided(Budget::Samples(16), 0), &|_, _| {})?;
+    let result = render(&scene, &RenderOptions::unguided(Budget::Samples(16), 0), &|_, _| true)?;
     println!("{}", scene.describe());
     println!("mean pixel {:?} after {:.2} s", result.film.average(), result.seconds);
     if let Some(out) = std::env::args().nth(1) {

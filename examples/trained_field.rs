@@ -14,7 +14,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     options.guiding.components = Components::FULL;
     options.guiding.train = TrainBudget::Passes(3);
 
-    let (field, report) = train(&scene, &options, &|_, _| {})?;
+    let (field, report) = train(&scene, &options, &|_, _| true)?;
     println!(
         "trained {} passes ({} spp) in {:.2} s: {} regions, {} lobes, {} KiB",
         report.passes,
@@ -29,7 +29,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 
     // Later, perhaps in another process: load the field and render with it.
     let field = Field::load(std::io::BufReader::new(std::fs::File::open(&path)?))?;
-    let result = render_with_field(&scene, &options, &field, &|_, _| {})?;
+    let result = render_with_field(&scene, &options, &field, &|_, _| true)?;
     println!(
         "rendered {} spp in {:.2} s, mean pixel {:?}",
         result.spp,

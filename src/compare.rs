@@ -186,7 +186,7 @@ pub fn run(
             progress(mi, ci);
             let mut options = m.options.clone();
             options.budget = scaled(budget, fraction, &mut options);
-            let r = render(scene, &options, &|_, _| {})?;
+            let r = render(scene, &options, &|_, _| true)?;
             let seconds = r.seconds + r.training.as_ref().map_or(0.0, |t| t.seconds);
             checkpoints.push(Checkpoint {
                 fraction,

@@ -12,7 +12,7 @@
 //! let scene = zerovar::scene::load("scenes/fog-sphere.toml".as_ref(), &[]).unwrap();
 //! let mut options = RenderOptions::unguided(Budget::Samples(16), 0);
 //! options.guiding.components = Components::FULL; // train a field, then render with it
-//! let result = render(&scene, &options, &|_, _| {}).unwrap();
+//! let result = render(&scene, &options, &|_, _| true).unwrap();
 //! println!("mean pixel {:?}", result.film.average());
 //! ```
 

@@ -16,10 +16,38 @@ use crate::scene::Scene;
 use crate::stats::Counters;
 use glam::{Vec2, Vec3A};
 use rayon::prelude::*;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use zerovar_guiding::{Field, FieldConfig, FieldStats, GuidingError, PathRecorder, Sample};
 
 const TILE: u32 = 16;
+
+/// The progress callback: `progress(done, total)` as work completes (samples for a sample
+/// budget, milliseconds for a time budget and for training); returning `false` cancels the
+/// render, which stops within one tile per thread.
+pub type Progress<'a> = dyn Fn(u64, u64) -> bool + Sync + 'a;
+
+/// The caller's callback and whether it asked to stop.
+struct Monitor<'a> {
+    callback: &'a Progress<'a>,
+    stop: AtomicBool,
+}
+
+impl<'a> Monitor<'a> {
+    fn new(callback: &'a Progress<'a>) -> Self {
+        Self { callback, stop: AtomicBool::new(false) }
+    }
+
+    fn report(&self, done: u64, total: u64) {
+        if !(self.callback)(done, total) {
+            self.stop.store(true, Ordering::Relaxed);
+        }
+    }
+
+    fn stopped(&self) -> bool {
+        self.stop.load(Ordering::Relaxed)
+    }
+}
 
 /// How much to render.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -120,6 +148,9 @@ pub struct RenderResult {
     pub threads: usize,
     /// Training, when guiding was on and no field was given.
     pub training: Option<TrainingReport>,
+    /// Whether the progress callback cancelled the render: `spp` passes were completed and
+    /// the image holds exactly those.
+    pub cancelled: bool,
 }
 
 /// Why a render could not run.
@@ -133,19 +164,23 @@ pub enum RenderError {
         /// The system's reason.
         message: String,
     },
+    /// The progress callback cancelled the render during training.
+    #[error("cancelled during training")]
+    Cancelled,
     /// The guiding field rejected its settings or its training samples.
     #[error("guiding: {0}")]
     Guiding(#[from] GuidingError),
 }
 
-/// Renders `scene`, training a field first when guiding is on. `progress(done, total)` is
-/// called as work completes (samples for a sample budget, milliseconds for a time budget).
+/// Renders `scene`, training a field first when guiding is on; `progress` reports and may
+/// cancel (see `Progress`).
 pub fn render(
     scene: &Scene,
     options: &RenderOptions,
-    progress: &(dyn Fn(u64, u64) + Sync),
+    progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
     in_pool(options, |threads| {
+        let progress = &Monitor::new(progress);
         if !options.guiding.components.any() {
             return Ok(final_phase(
                 scene,
@@ -177,9 +212,10 @@ pub fn render_with_field(
     scene: &Scene,
     options: &RenderOptions,
     field: &Field,
-    progress: &(dyn Fn(u64, u64) + Sync),
+    progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
     in_pool(options, |threads| {
+        let progress = &Monitor::new(progress);
         Ok(final_phase(
             scene,
             options,
@@ -197,9 +233,12 @@ pub fn render_with_field(
 pub fn train(
     scene: &Scene,
     options: &RenderOptions,
-    progress: &(dyn Fn(u64, u64) + Sync),
+    progress: &Progress<'_>,
 ) -> Result<(Field, TrainingReport), RenderError> {
-    in_pool(options, |_| train_in_pool(scene, options, progress).map(|(f, _, _, r)| (f, r)))
+    in_pool(options, |_| {
+        let progress = &Monitor::new(progress);
+        train_in_pool(scene, options, progress).map(|(f, _, _, r)| (f, r))
+    })
 }
 
 fn in_pool<T: Send>(
@@ -232,7 +271,7 @@ fn walk_settings(scene: &Scene, options: &RenderOptions) -> WalkSettings {
 fn train_in_pool(
     scene: &Scene,
     options: &RenderOptions,
-    progress: &(dyn Fn(u64, u64) + Sync),
+    progress: &Monitor<'_>,
 ) -> Result<(Field, DirectFluence, Vec<Film>, TrainingReport), RenderError> {
     let start = Instant::now();
     let mut field = Field::new(options.guiding.field.clone())?;
@@ -256,7 +295,7 @@ fn train_in_pool(
         // Each pass draws from its own streams, independent of the render phase's.
         let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
         let pass_start = Instant::now();
-        let (_, samples, records) = render_pass(
+        let Some((_, samples, records)) = render_pass(
             scene,
             &settings,
             seed,
@@ -266,17 +305,20 @@ fn train_in_pool(
             Some((&field, Some(&direct))),
             estimate.as_deref(),
             true,
+            progress,
             &|_| {},
-        );
+        ) else {
+            return Err(RenderError::Cancelled);
+        };
         field.update(&samples)?;
         direct = DirectFluence::build(&field, &records);
         samples_total += samples.len() as u64;
         spp += count;
         films.push(film);
         match limit {
-            None => progress(((1u64 << (pass + 1)) - 1) * (w * h) as u64, total),
+            None => progress.report(((1u64 << (pass + 1)) - 1) * (w * h) as u64, total),
             Some(t) => {
-                progress((start.elapsed().as_millis() as u64).min(total), total);
+                progress.report((start.elapsed().as_millis() as u64).min(total), total);
                 // Stop when the next pass (twice as long) would overrun the budget.
                 if start.elapsed() + pass_start.elapsed() * 2 > t {
                     break;
@@ -328,7 +370,7 @@ fn final_phase(
     training: Option<&[Film]>,
     training_films: Vec<Film>,
     threads: usize,
-    progress: &(dyn Fn(u64, u64) + Sync),
+    progress: &Monitor<'_>,
     report: Option<TrainingReport>,
 ) -> RenderResult {
     let settings = if field.is_some() {
@@ -345,32 +387,12 @@ fn final_phase(
     let est = estimate.as_deref();
     match options.budget {
         Budget::Samples(spp) => {
+            // Doubling passes, so a cancelled render still returns whole passes.
             let total = spp as u64 * w as u64 * h as u64;
-            let finished = std::sync::atomic::AtomicU64::new(0);
-            let (c, _, _) = render_pass(
-                scene,
-                &settings,
-                options.seed,
-                0,
-                spp,
-                &mut film,
-                field,
-                est,
-                false,
-                &|n| {
-                    let d = finished.fetch_add(n, std::sync::atomic::Ordering::Relaxed) + n;
-                    progress(d, total);
-                },
-            );
-            counters += c;
-            done = spp;
-        }
-        Budget::Time(limit) => {
-            let total = limit.as_millis() as u64;
-            let mut batch = 1u32;
-            loop {
-                let pass_start = Instant::now();
-                let (c, _, _) = render_pass(
+            let finished = AtomicU64::new(0);
+            while done < spp {
+                let batch = done.max(1).min(spp - done);
+                let Some((c, _, _)) = render_pass(
                     scene,
                     &settings,
                     options.seed,
@@ -380,12 +402,45 @@ fn final_phase(
                     field,
                     est,
                     false,
+                    progress,
+                    &|n| {
+                        let d = finished.fetch_add(n, Ordering::Relaxed) + n;
+                        progress.report(d, total);
+                    },
+                ) else {
+                    break;
+                };
+                counters += c;
+                done += batch;
+            }
+        }
+        Budget::Time(limit) => {
+            let total = limit.as_millis() as u64;
+            let mut batch = 1u32;
+            loop {
+                let pass_start = Instant::now();
+                let Some((c, _, _)) = render_pass(
+                    scene,
+                    &settings,
+                    options.seed,
+                    done,
+                    batch,
+                    &mut film,
+                    field,
+                    est,
+                    false,
+                    progress,
                     &|_| {},
-                );
+                ) else {
+                    break;
+                };
                 counters += c;
                 done += batch;
                 let elapsed = start.elapsed();
-                progress((elapsed.as_millis() as u64).min(total), total);
+                progress.report((elapsed.as_millis() as u64).min(total), total);
+                if progress.stopped() {
+                    break;
+                }
                 let per_sample = pass_start.elapsed().as_secs_f64() / batch as f64;
                 let left = limit.as_secs_f64() - elapsed.as_secs_f64();
                 if left <= per_sample {
@@ -409,6 +464,7 @@ fn final_phase(
         counters,
         threads,
         training: report,
+        cancelled: progress.stopped(),
     }
 }
 
@@ -452,8 +508,12 @@ fn combine_by_inverse_variance(training: &[Film], last: &Film) -> Vec<[f32; 3]> 
         .collect()
 }
 
+/// What a pass returns: its counters, training samples and direct-fluence records.
+type PassOutput = (Counters, Vec<Sample>, Vec<(Vec3A, f32)>);
+
 /// Adds samples `first .. first + count` of every pixel to `film`; returns the counters and,
-/// when `record`, the training samples and direct-fluence records in tile order.
+/// when `record`, the training samples and direct-fluence records in tile order. Returns
+/// `None`, leaving `film` untouched, when `monitor` was told to stop during the pass.
 #[allow(clippy::too_many_arguments)]
 fn render_pass(
     scene: &Scene,
@@ -465,8 +525,9 @@ fn render_pass(
     field: Option<(&Field, Option<&DirectFluence>)>,
     estimate: Option<&[f32]>,
     record: bool,
+    monitor: &Monitor<'_>,
     on_tile: &(dyn Fn(u64) + Sync),
-) -> (Counters, Vec<Sample>, Vec<(Vec3A, f32)>) {
+) -> Option<PassOutput> {
     let [w, h] = scene.camera.resolution;
     let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE))
         .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty)))
@@ -475,6 +536,9 @@ fn render_pass(
     let results: Vec<TileResult> = tiles
         .par_iter()
         .map(|&(tx, ty)| {
+            if monitor.stopped() {
+                return Default::default(); // the pass is discarded below
+            }
             let out = match field {
                 Some((f, direct)) => {
                     let mut cache = FieldCache::with_direct(f, direct, record);
@@ -510,6 +574,9 @@ fn render_pass(
             out
         })
         .collect();
+    if monitor.stopped() {
+        return None;
+    }
     let mut counters = Counters::default();
     let mut samples = Vec::new();
     let mut records = Vec::new();
@@ -524,7 +591,7 @@ fn render_pass(
             film.pixels[(y * w + x) as usize].merge(s);
         }
     }
-    (counters, samples, records)
+    Some((counters, samples, records))
 }
 
 #[allow(clippy::too_many_arguments)]

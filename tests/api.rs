@@ -81,9 +81,9 @@ fn a_host_density_renders_like_the_same_grid() {
     as_host.replace_medium("m", medium(DensityField::Custom(Arc::new(Host(grid()))))).unwrap();
     assert_eq!(as_host.media[0].name, "m");
     let a =
-        render(&as_grid, &RenderOptions::unguided(Budget::Samples(512), 1), &|_, _| {}).unwrap();
+        render(&as_grid, &RenderOptions::unguided(Budget::Samples(512), 1), &|_, _| true).unwrap();
     let b =
-        render(&as_host, &RenderOptions::unguided(Budget::Samples(512), 2), &|_, _| {}).unwrap();
+        render(&as_host, &RenderOptions::unguided(Budget::Samples(512), 2), &|_, _| true).unwrap();
     assert_same_image(&a.film, &b.film, 4.5, "host density against grid");
     // The comparison can fail: a different density is told apart.
     let mut other = scene(SCENE);
@@ -97,10 +97,39 @@ fn a_host_density_renders_like_the_same_grid() {
             }))))),
         )
         .unwrap();
-    let c = render(&other, &RenderOptions::unguided(Budget::Samples(512), 3), &|_, _| {}).unwrap();
+    let c =
+        render(&other, &RenderOptions::unguided(Budget::Samples(512), 3), &|_, _| true).unwrap();
     let differs =
         std::panic::catch_unwind(|| assert_same_image(&a.film, &c.film, 4.5, "different")).is_err();
     assert!(differs, "a much thinner medium rendered the same image");
     let err = as_grid.replace_medium("nope", medium(DensityField::Grid(grid()))).unwrap_err();
     assert!(err.to_string().contains("nope") && err.to_string().contains("m"), "{err}");
+}
+
+#[test]
+fn cancelling_from_the_callback_returns_whole_passes() {
+    let s = scene(SCENE);
+    let total_spp = 4096;
+    let calls = std::sync::atomic::AtomicU64::new(0);
+    let start = std::time::Instant::now();
+    // Cancel as soon as anything is reported: the first pass (1 spp) completes at most.
+    let r = render(&s, &RenderOptions::unguided(Budget::Samples(total_spp), 1), &|_, _| {
+        calls.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        false
+    })
+    .unwrap();
+    assert!(r.cancelled);
+    assert!(r.spp < total_spp, "{} spp after cancelling", r.spp);
+    assert!(calls.load(std::sync::atomic::Ordering::Relaxed) >= 1);
+    assert!(r.film.pixels.iter().all(|p| p.count == r.spp), "pixels hold partial passes");
+    assert!(r.image.iter().flatten().all(|v| v.is_finite()));
+    assert!(start.elapsed().as_secs_f64() < 5.0, "cancelling took {:?}", start.elapsed());
+    // Not cancelling renders everything.
+    let full = render(&s, &RenderOptions::unguided(Budget::Samples(8), 1), &|_, _| true).unwrap();
+    assert!(!full.cancelled && full.spp == 8);
+    // Cancelling while a field trains is an error, not a half-trained render.
+    let mut guided = RenderOptions::unguided(Budget::Samples(8), 1);
+    guided.guiding.components = zerovar::guided::Components::FULL;
+    let err = render(&s, &guided, &|_, _| false).unwrap_err();
+    assert!(matches!(err, zerovar::render::RenderError::Cancelled), "{err}");
 }

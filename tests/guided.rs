@@ -389,7 +389,7 @@ fn render_with(s: &Scene, components: Components, alpha: f32, spp: u32, seed: u6
         ..GuidingOptions::default()
     };
     let options = RenderOptions { budget: Budget::Samples(spp), seed, threads: None, guiding };
-    let r = render(s, &options, &|_, _| {}).unwrap();
+    let r = render(s, &options, &|_, _| true).unwrap();
     assert_eq!(r.counters.invalid_samples, 0);
     r.film
 }

@@ -59,7 +59,7 @@ fn image_does_not_depend_on_thread_count() {
         };
         o.guiding.components = guiding;
         o.guiding.train = TrainBudget::Passes(3);
-        render(&s, &o, &|_, _| {}).unwrap()
+        render(&s, &o, &|_, _| true).unwrap()
     };
     for guiding in [Components::OFF, Components::FULL] {
         let (a, b) = (run(1, guiding), run(2, guiding));
@@ -70,7 +70,7 @@ fn image_does_not_depend_on_thread_count() {
     let c = render(
         &s,
         &RenderOptions { threads: Some(2), ..RenderOptions::unguided(Budget::Samples(4), 10) },
-        &|_, _| {},
+        &|_, _| true,
     )
     .unwrap();
     assert_ne!(a.film.pixels, c.film.pixels, "the seed must matter");
@@ -148,7 +148,7 @@ intensity = 1
         let mut o = RenderOptions::unguided(Budget::Samples(8), 1);
         o.guiding.components = guiding;
         o.guiding.train = TrainBudget::Passes(3);
-        let r = render(&s, &o, &|_, _| {}).unwrap();
+        let r = render(&s, &o, &|_, _| true).unwrap();
         assert_eq!(
             r.counters.invalid_samples, 0,
             "NaN or Inf samples ({guiding:?}): {:?}",

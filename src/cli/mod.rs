@@ -257,6 +257,7 @@ fn run_reference(a: ReferenceArgs) -> Result<()> {
     let result = render(&scene, &options, &|done, total| {
         bar.set_length(total);
         bar.set_position(done);
+        true
     })?;
     bar.finish_and_clear();
     let [w, h] = scene.camera.resolution;
@@ -397,6 +398,7 @@ fn run_train(a: TrainArgs) -> Result<()> {
     let (field, report) = zerovar::render::train(&scene, &options, &|done, total| {
         bar.set_length(total);
         bar.set_position(done);
+        true
     })?;
     bar.finish_and_clear();
     field
@@ -501,6 +503,7 @@ fn run_render(c: RenderCommand) -> Result<()> {
     let report = |done, total| {
         bar.set_length(total);
         bar.set_position(done);
+        true
     };
     let result = match &c.field {
         Some(path) => {
