@@ -2,14 +2,14 @@
 //! with an analytic cache, robustness of splitting to a wrong cache, and convergence of every
 //! guided component to the unguided image (the proof of unbiasedness).
 
-use crate::common::scene;
+use crate::common::{quadrant_means, scene};
 use glam::{Vec2, Vec3A};
 use std::cell::RefCell;
 use zerovar::film::Film;
 use zerovar::guided::distance::GuidedDistance;
 use zerovar::guided::{Components, NoCache, RadianceCache};
 use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
-use zerovar::math::{Ray, luminance};
+use zerovar::math::Ray;
 use zerovar::media::Medium;
 use zerovar::render::{Budget, GuidingOptions, RenderOptions, TrainBudget, render};
 use zerovar::rng::Sampler;
@@ -255,39 +255,6 @@ radiance = 1
     }
 }
 
-/// Mean luminance of the four quadrants with their standard errors.
-fn quadrants(f: &Film) -> [MeanEstimate; 4] {
-    let mut q: [MeanEstimate; 4] = Default::default();
-    let (w, h) = (f.width as usize, f.height as usize);
-    // Per quadrant: the mean of pixel means, with the variance of the pixel means summed.
-    let mut var = [0.0f64; 4];
-    let mut sums = [0.0f64; 4];
-    let mut counts = [0usize; 4];
-    for (i, p) in f.pixels.iter().enumerate() {
-        let k = (i % w >= w / 2) as usize + 2 * (i / w >= h / 2) as usize;
-        let n = p.count as f64;
-        let m = luminance(glam::Vec3A::from_array(p.mean())) as f64;
-        sums[k] += m;
-        var[k] += ((p.lum_sq / n - m * m).max(0.0)) / (n - 1.0);
-        counts[k] += 1;
-    }
-    for k in 0..4 {
-        let c = counts[k] as f64;
-        // A MeanEstimate from two points with the right mean and standard error.
-        let (mean, se) = (sums[k] / c, (var[k]).sqrt() / c);
-        q[k].push(mean - se / std::f64::consts::SQRT_2);
-        q[k].push(mean + se / std::f64::consts::SQRT_2);
-    }
-    q
-}
-
-fn z(a: &MeanEstimate, b: &MeanEstimate) -> f64 {
-    // Each was built from two points holding mean +- se / sqrt 2: std_error() is se / sqrt 2.
-    let (sa, sb) =
-        (a.std_error() * std::f64::consts::SQRT_2, b.std_error() * std::f64::consts::SQRT_2);
-    (a.mean - b.mean) / (sa * sa + sb * sb).sqrt()
-}
-
 const FOG: &str = r#"
 [camera]
 origin = [0, 1.2, 4]
@@ -399,7 +366,7 @@ fn every_guided_component_converges_to_the_unguided_image() {
     let mut worst = 0.0f64;
     for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
         let s = scene(text);
-        let reference = quadrants(&render_with(&s, Components::OFF, 0.0, 1024, 100));
+        let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
         let sets = [
             (
                 "directions+distances",
@@ -414,15 +381,13 @@ fn every_guided_component_converges_to_the_unguided_image() {
         ];
         for (what, c) in sets {
             for alpha in [0.1f32, 0.5, 1.0] {
-                let q = quadrants(&render_with(&s, c, alpha, 256, 7));
-                for k in 0..4 {
-                    let zk = z(&q[k], &reference[k]);
+                let q = quadrant_means(&render_with(&s, c, alpha, 256, 7));
+                for (k, ((m, se), (mr, ser))) in q.into_iter().zip(reference).enumerate() {
+                    let zk = (m - mr) / (se * se + ser * ser).sqrt();
                     worst = worst.max(zk.abs());
                     assert!(
                         zk.abs() < 4.5,
-                        "{name}, {what}, alpha {alpha}, quadrant {k}: {} vs unguided {} (z = {zk:.2})",
-                        q[k].mean,
-                        reference[k].mean
+                        "{name}, {what}, alpha {alpha}, quadrant {k}: {m} vs unguided {mr} (z = {zk:.2})"
                     );
                 }
             }
