@@ -9,6 +9,7 @@
 
 use super::{Flight, FlightEvent, TrackedRay};
 use crate::math::{Spectrum, channel_mean};
+use crate::media::Coefficients;
 use crate::rng::Sampler;
 use crate::stats::Counters;
 
@@ -26,6 +27,35 @@ fn escape(weight: Spectrum, emitted: Spectrum) -> Flight {
 #[inline]
 fn scatter(t: f32, weight: Spectrum, emitted: Spectrum) -> Flight {
     Flight { event: FlightEvent::Scatter { t }, weight, emitted }
+}
+
+/// Tentative collisions at `rate` over `(t0, t1)`, one density lookup each: `visit(t,
+/// coefficients, sampler)` decides at each, and its first `Some` ends the walk. The exponential
+/// restarts at every span boundary, which its memorylessness allows.
+#[inline]
+fn tentative<R: TrackedRay, T>(
+    r: &R,
+    (t0, t1): (f32, f32),
+    rate: f32,
+    s: &mut Sampler,
+    c: &mut Counters,
+    mut visit: impl FnMut(f32, Coefficients, &mut Sampler) -> Option<T>,
+) -> Option<T> {
+    if rate <= 0.0 {
+        return None;
+    }
+    let mut t = t0;
+    loop {
+        t += exp_step(s.next_1d(), rate);
+        if t >= t1 {
+            return None;
+        }
+        let co = r.coefficients(t);
+        c.density_lookups += 1;
+        if let Some(v) = visit(t, co, s) {
+            return Some(v);
+        }
+    }
 }
 
 /// The emission `sigma_a L_e` of extinction `sigma` with albedo `albedo`.
@@ -113,23 +143,14 @@ pub(super) fn delta<R: TrackedRay>(
     let mut emitted = Spectrum::ZERO;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        if mu_bar <= 0.0 {
-            continue;
-        }
-        let mut t = seg.t0;
-        loop {
-            t += exp_step(s.next_1d(), mu_bar);
-            if t >= seg.t1 {
-                break;
-            }
-            let co = r.coefficients(t);
-            c.density_lookups += 1;
+        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |t, co, s| {
             if emissive {
                 emitted += beta * absorbed(co.sigma_t, co.albedo, emission) / mu_bar;
             }
-            if s.next_1d() * mu_bar < co.sigma_t.x {
-                return scatter(t, co.albedo, emitted);
-            }
+            (s.next_1d() * mu_bar < co.sigma_t.x).then(|| scatter(t, co.albedo, emitted))
+        });
+        if let Some(flight) = hit {
+            return flight;
         }
     }
     escape(Spectrum::ONE, emitted)
@@ -150,17 +171,7 @@ pub(super) fn weighted_delta<R: TrackedRay>(
     let mut w = 1.0f32;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        if mu_bar <= 0.0 {
-            continue;
-        }
-        let mut t = seg.t0;
-        loop {
-            t += exp_step(s.next_1d(), mu_bar);
-            if t >= seg.t1 {
-                break;
-            }
-            let co = r.coefficients(t);
-            c.density_lookups += 1;
+        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |t, co, s| {
             let mu_t = co.sigma_t.x;
             let mu_n = mu_bar - mu_t;
             if emissive {
@@ -169,9 +180,13 @@ pub(super) fn weighted_delta<R: TrackedRay>(
             let total = mu_t.abs() + mu_n.abs();
             if s.next_1d() * total < mu_t.abs() {
                 w *= mu_t.signum() * total / mu_bar;
-                return scatter(t, co.albedo * w, emitted);
+                return Some(scatter(t, co.albedo * w, emitted));
             }
             w *= mu_n.signum() * total / mu_bar;
+            None
+        });
+        if let Some(flight) = hit {
+            return flight;
         }
     }
     escape(Spectrum::splat(w), emitted)
@@ -194,24 +209,16 @@ pub(super) fn decomposition<R: TrackedRay>(
         let mu_r = (seg.majorant.max_element() - mu_c).max(0.0);
         let t_c = if mu_c > 0.0 { seg.t0 + exp_step(s.next_1d(), mu_c) } else { f32::INFINITY };
         let end = t_c.min(seg.t1);
-        if mu_r > 0.0 {
-            let mut t = seg.t0;
-            loop {
-                t += exp_step(s.next_1d(), mu_r);
-                if t >= end {
-                    break;
-                }
-                let co = r.coefficients(t);
-                c.density_lookups += 1;
-                let residual = co.sigma_t.x - mu_c;
-                if emissive {
-                    let sigma = co.sigma_t - Spectrum::splat(mu_c);
-                    emitted += beta * absorbed(sigma, co.albedo, emission) / mu_r;
-                }
-                if s.next_1d() * mu_r < residual {
-                    return scatter(t, co.albedo, emitted);
-                }
+        let hit = tentative(r, (seg.t0, end), mu_r, s, c, |t, co, s| {
+            let residual = co.sigma_t.x - mu_c;
+            if emissive {
+                let sigma = co.sigma_t - Spectrum::splat(mu_c);
+                emitted += beta * absorbed(sigma, co.albedo, emission) / mu_r;
             }
+            (s.next_1d() * mu_r < residual).then(|| scatter(t, co.albedo, emitted))
+        });
+        if let Some(flight) = hit {
+            return flight;
         }
         if t_c < seg.t1 {
             let a = r.albedo(t_c);
@@ -330,17 +337,7 @@ pub(super) fn spectral<R: TrackedRay>(
     let mut w = Spectrum::ONE;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        if mu_bar <= 0.0 {
-            continue;
-        }
-        let mut t = seg.t0;
-        loop {
-            t += exp_step(s.next_1d(), mu_bar);
-            if t >= seg.t1 {
-                break;
-            }
-            let co = r.coefficients(t);
-            c.density_lookups += 1;
+        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |t, co, s| {
             let sigma_s = co.sigma_t * co.albedo;
             let sigma_n = Spectrum::splat(mu_bar) - co.sigma_t;
             let path = beta * w;
@@ -351,15 +348,19 @@ pub(super) fn spectral<R: TrackedRay>(
             let p_n = probability(probs, path, sigma_n);
             let total = p_s + p_n;
             if total.is_nan() || total <= 0.0 {
-                return escape(Spectrum::ZERO, emitted);
+                return Some(escape(Spectrum::ZERO, emitted));
             }
             if s.next_1d() * total < p_s {
                 w *= sigma_s * (total / (mu_bar * p_s));
                 observe(SpectralEvent::Scatter, beta * w);
-                return scatter(t, w, emitted);
+                return Some(scatter(t, w, emitted));
             }
             w *= sigma_n * (total / (mu_bar * p_n));
             observe(SpectralEvent::Null, beta * w);
+            None
+        });
+        if let Some(flight) = hit {
+            return flight;
         }
     }
     escape(w, emitted)
@@ -457,21 +458,12 @@ pub(super) fn ratio<R: TrackedRay>(r: &R, s: &mut Sampler, c: &mut Counters) -> 
     let mut tr = Spectrum::ONE;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        if mu_bar <= 0.0 {
-            continue;
-        }
-        let mut t = seg.t0;
-        loop {
-            t += exp_step(s.next_1d(), mu_bar);
-            if t >= seg.t1 {
-                break;
-            }
-            let co = r.coefficients(t);
-            c.density_lookups += 1;
+        let ended = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |_, co, s| {
             tr *= Spectrum::ONE - co.sigma_t / mu_bar;
-            if !roulette(&mut tr, s) {
-                return Spectrum::ZERO;
-            }
+            (!roulette(&mut tr, s)).then_some(())
+        });
+        if ended.is_some() {
+            return Spectrum::ZERO;
         }
     }
     tr
@@ -487,21 +479,12 @@ pub(super) fn residual_ratio<R: TrackedRay>(r: &R, s: &mut Sampler, c: &mut Coun
         let len = seg.t1 - seg.t0;
         tr *= super::transmittance_homogeneous(mu_c, len);
         let mu_r = (seg.majorant - mu_c).abs().max_element();
-        if mu_r <= 0.0 {
-            continue;
-        }
-        let mut t = seg.t0;
-        loop {
-            t += exp_step(s.next_1d(), mu_r);
-            if t >= seg.t1 {
-                break;
-            }
-            let co = r.coefficients(t);
-            c.density_lookups += 1;
+        let ended = tentative(r, (seg.t0, seg.t1), mu_r, s, c, |_, co, s| {
             tr *= Spectrum::ONE - (co.sigma_t - mu_c) / mu_r;
-            if !roulette(&mut tr, s) {
-                return Spectrum::ZERO;
-            }
+            (!roulette(&mut tr, s)).then_some(())
+        });
+        if ended.is_some() {
+            return Spectrum::ZERO;
         }
     }
     tr
