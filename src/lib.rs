@@ -30,6 +30,7 @@ pub mod media;
 pub mod metrics;
 pub mod output;
 pub mod phase;
+pub mod plot;
 pub mod render;
 pub mod rng;
 pub mod scene;

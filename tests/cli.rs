@@ -278,8 +278,17 @@ fn reference_and_compare_end_to_end() {
         "a-error.png",
         "g.exr",
         "strip.png",
+        "convergence.png",
+        "convergence.svg",
     ] {
         assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    // The plot names every method in its legend.
+    let svg = std::fs::read_to_string(dir.join("convergence.svg")).unwrap();
+    let texts: Vec<&str> =
+        svg.split("</text>").filter_map(|t| t.rsplit('>').next()).map(str::trim).collect();
+    for name in ["a", "b", "g", "relMSE"] {
+        assert!(texts.contains(&name), "convergence.svg lacks the label {name}: {texts:?}");
     }
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();

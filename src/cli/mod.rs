@@ -320,6 +320,11 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     write("results.md", table.clone())?;
     write("results.csv", csv(&results))?;
     write("results.json", serde_json::to_string_pretty(&results)? + "\n")?;
+    let stem = a.scene.scene.file_stem().unwrap_or_default().to_string_lossy();
+    let title = format!("{stem}: relMSE against time");
+    for plot in ["convergence.png", "convergence.svg"] {
+        zerovar::plot::convergence(&results, &title, &a.out.join(plot))?;
+    }
     let mut strip = reference.clone();
     let mut strip_w = w as usize;
     for r in &results {
