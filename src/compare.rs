@@ -7,7 +7,7 @@
 
 use crate::guided::Components;
 use crate::metrics::{ImageError, MetricsError, compare as measure};
-use crate::render::{Budget, RenderError, RenderOptions, TrainBudget, render};
+use crate::render::{Budget, RenderError, RenderOptions, TrainBudget, parse_guiding, render};
 use crate::scene::Scene;
 use crate::tracking::TrackerChoice;
 use serde::Serialize;
@@ -73,8 +73,10 @@ impl Method {
             };
             match key {
                 "guiding" => {
-                    m.options.guiding.components = Components::parse(value)
-                        .ok_or_else(|| err(format!("guiding: unknown mode `{value}`")))?
+                    let (components, adaptive) = parse_guiding(value)
+                        .ok_or_else(|| err(format!("guiding: unknown mode `{value}`")))?;
+                    m.options.guiding.components = components;
+                    m.options.guiding.adaptive = adaptive;
                 }
                 "alpha" => {
                     let a = number()?;
@@ -114,10 +116,13 @@ impl Method {
         Ok(m)
     }
 
-    /// The default methods: unguided, and guided with everything on.
+    /// The default methods: unguided, guided with everything on, and adaptive guiding (full
+    /// guiding in the tiles where it pays).
     pub fn defaults(base: &RenderOptions) -> Vec<Method> {
         let mut guided = base.clone();
         guided.guiding.components = Components::FULL;
+        let mut auto = guided.clone();
+        auto.guiding.adaptive = true;
         vec![
             Method {
                 name: "unguided".into(),
@@ -125,6 +130,7 @@ impl Method {
                 tracker: TrackerChoice::Auto,
             },
             Method { name: "guided".into(), options: guided, tracker: TrackerChoice::Auto },
+            Method { name: "auto".into(), options: auto, tracker: TrackerChoice::Auto },
         ]
     }
 }

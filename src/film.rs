@@ -39,17 +39,32 @@ impl PixelSum {
         self.count += o.count;
     }
 
-    /// The standard error of the mean RGB (zero with fewer than two samples).
-    pub fn std_error(&self) -> [f32; 3] {
+    /// The unbiased sample variance of one RGB sample (zero with fewer than two samples).
+    pub fn variance(&self) -> [f64; 3] {
         if self.count < 2 {
             return [0.0; 3];
         }
         let n = self.count as f64;
         std::array::from_fn(|i| {
             let mean = self.rgb[i] / n;
-            let var = (self.rgb_sq[i] / n - mean * mean).max(0.0) * n / (n - 1.0);
-            (var / n).sqrt() as f32
+            (self.rgb_sq[i] / n - mean * mean).max(0.0) * n / (n - 1.0)
         })
+    }
+
+    /// The unbiased sample variance of one sample's luminance (zero with fewer than two).
+    pub fn luminance_variance(&self) -> f64 {
+        if self.count < 2 {
+            return 0.0;
+        }
+        let n = self.count as f64;
+        let mean = luminance(Spectrum::from_array(self.mean())) as f64;
+        (self.lum_sq / n - mean * mean).max(0.0) * n / (n - 1.0)
+    }
+
+    /// The standard error of the mean RGB (zero with fewer than two samples).
+    pub fn std_error(&self) -> [f32; 3] {
+        let n = self.count.max(1) as f64;
+        self.variance().map(|v| (v / n).sqrt() as f32)
     }
 
     /// The mean RGB.

@@ -17,8 +17,16 @@ pub struct Counters {
     pub surface_scatters: u64,
     /// Density lookups by trackers.
     pub density_lookups: u64,
+    /// The part of `density_lookups` made by guided flights in heterogeneous media (which
+    /// step by the medium's global majorant, without a majorant grid to walk).
+    pub guided_density_lookups: u64,
     /// Samples that came out NaN or infinite and were dropped.
     pub invalid_samples: u64,
+    /// Guiding-field queries: a region's distribution loaded at a vertex, or its estimates
+    /// read for guided distances.
+    pub field_lookups: u64,
+    /// Products of a region's mixture with a phase function.
+    pub products: u64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -29,7 +37,10 @@ impl std::ops::AddAssign for Counters {
         self.medium_scatters += o.medium_scatters;
         self.surface_scatters += o.surface_scatters;
         self.density_lookups += o.density_lookups;
+        self.guided_density_lookups += o.guided_density_lookups;
         self.invalid_samples += o.invalid_samples;
+        self.field_lookups += o.field_lookups;
+        self.products += o.products;
     }
 }
 
@@ -63,6 +74,15 @@ pub struct RenderStats {
     /// Guiding: training, when a field was trained.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub training: Option<TrainingStats>,
+    /// Adaptive guiding: which tiles the pilot chose to guide.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub selection: Option<crate::render::Selection>,
+    /// Density lookups per path made by guided flights (included in the total above).
+    pub guided_density_lookups_per_path: f64,
+    /// Guiding-field queries per path.
+    pub field_lookups_per_path: f64,
+    /// Products of a region's mixture with the phase function per path.
+    pub products_per_path: f64,
 }
 
 /// The training part of `--stats`.
@@ -102,6 +122,10 @@ impl RenderStats {
             invalid_samples: c.invalid_samples,
             splitting_factor: if c.paths > 0 { c.walks as f64 / c.paths as f64 } else { 1.0 },
             training: None,
+            selection: None,
+            guided_density_lookups_per_path: per_path(c.guided_density_lookups),
+            field_lookups_per_path: per_path(c.field_lookups),
+            products_per_path: per_path(c.products),
         }
     }
 }

@@ -349,10 +349,22 @@ radiance = 0.2
 "#;
 
 fn render_with(s: &Scene, components: Components, alpha: f32, spp: u32, seed: u64) -> Film {
+    render_adaptive(s, components, alpha, spp, seed, false)
+}
+
+fn render_adaptive(
+    s: &Scene,
+    components: Components,
+    alpha: f32,
+    spp: u32,
+    seed: u64,
+    adaptive: bool,
+) -> Film {
     let guiding = GuidingOptions {
         components,
         alpha,
         train: TrainBudget::Passes(4),
+        adaptive,
         ..GuidingOptions::default()
     };
     let options = RenderOptions { budget: Budget::Samples(spp), seed, threads: None, guiding };
@@ -394,6 +406,21 @@ fn every_guided_component_converges_to_the_unguided_image() {
         }
     }
     eprintln!("largest |z| of guided against unguided: {worst:.2}");
+}
+
+#[test]
+fn adaptive_guiding_converges_to_the_unguided_image() {
+    // Whichever tiles the pilot guides, each pixel averages samples of one unbiased strategy
+    // drawn independently of the pilot, so the image converges to the unguided one.
+    for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
+        let s = scene(text);
+        let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
+        let q = quadrant_means(&render_adaptive(&s, Components::FULL, 0.5, 256, 7, true));
+        for (k, ((m, se), (mr, ser))) in q.into_iter().zip(reference).enumerate() {
+            let z = (m - mr) / (se * se + ser * ser).sqrt();
+            assert!(z.abs() < 4.5, "{name}, quadrant {k}: {m} vs unguided {mr} (z = {z:.2})");
+        }
+    }
 }
 
 #[test]

@@ -52,21 +52,29 @@ angular_diameter = 2
 #[test]
 fn image_does_not_depend_on_thread_count() {
     let s = scene(SMALL);
-    let run = |threads, guiding: Components| {
+    let run = |threads, guiding: Components, adaptive: bool| {
         let mut o = RenderOptions {
             threads: Some(threads),
             ..RenderOptions::unguided(Budget::Samples(4), 9)
         };
         o.guiding.components = guiding;
+        o.guiding.adaptive = adaptive;
         o.guiding.train = TrainBudget::Passes(3);
         render(&s, &o, &|_, _| true).unwrap()
     };
-    for guiding in [Components::OFF, Components::FULL] {
-        let (a, b) = (run(1, guiding), run(2, guiding));
+    for (guiding, adaptive) in
+        [(Components::OFF, false), (Components::FULL, false), (Components::FULL, true)]
+    {
+        let (a, b) = (run(1, guiding, adaptive), run(2, guiding, adaptive));
         assert_eq!(a.film.pixels, b.film.pixels, "1 and 2 threads differ ({guiding:?})");
         assert_eq!(a.counters, b.counters);
+        // Adaptive guiding chooses its tiles by counted work, not by time.
+        let tiles =
+            |r: &zerovar::render::RenderResult| r.selection.as_ref().map(|s| s.guided_tiles);
+        assert_eq!(tiles(&a), tiles(&b));
+        assert_eq!(tiles(&a).is_some(), adaptive);
     }
-    let a = run(1, Components::OFF);
+    let a = run(1, Components::OFF, false);
     let c = render(
         &s,
         &RenderOptions { threads: Some(2), ..RenderOptions::unguided(Budget::Samples(4), 10) },

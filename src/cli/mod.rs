@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::time::Duration;
 use zerovar::guided::Components;
 use zerovar::output::{ImageMetadata, write_exr, write_png};
+use zerovar::render::parse_guiding;
 use zerovar::render::{
     Budget, GuidingOptions, RenderOptions, TrainBudget, render, render_with_field,
 };
@@ -99,7 +100,7 @@ struct CompareArgs {
 #[derive(Args)]
 struct GuidingArgs {
     /// Guided decisions: off, directions, distances, rr, full, or a +-joined list
-    /// (e.g. directions+rr).
+    /// (e.g. directions+rr); auto is full guiding in the tiles where a pilot finds it pays.
     #[arg(long, default_value = "off", value_name = "MODE")]
     guiding: String,
     /// Probability of the guided strategy in each mixture with standard sampling, in [0, 1]
@@ -363,9 +364,9 @@ fn side_by_side(
 
 /// Validates guiding arguments; `default_full` makes `off` mean everything (for `train`).
 fn validate_guiding(a: &GuidingArgs, default_full: bool) -> Result<GuidingOptions> {
-    let Some(mut components) = Components::parse(&a.guiding) else {
+    let Some((mut components, adaptive)) = parse_guiding(&a.guiding) else {
         bail!(
-            "--guiding {}: use off, directions, distances, rr, full, or a +-joined list",
+            "--guiding {}: use off, directions, distances, rr, full, auto, or a +-joined list",
             a.guiding
         );
     };
@@ -385,7 +386,7 @@ fn validate_guiding(a: &GuidingArgs, default_full: bool) -> Result<GuidingOption
         }
         None => TrainBudget::Passes(a.train_passes),
     };
-    Ok(GuidingOptions { components, alpha: a.alpha, train, ..GuidingOptions::default() })
+    Ok(GuidingOptions { components, alpha: a.alpha, train, adaptive, ..GuidingOptions::default() })
 }
 
 fn run_train(a: TrainArgs) -> Result<()> {
@@ -538,6 +539,7 @@ fn run_render(c: RenderCommand) -> Result<()> {
     stats.resolution = [w, h];
     stats.seed = seed;
     stats.threads = result.threads;
+    stats.selection = result.selection.clone();
     stats.training = result.training.as_ref().map(|t| TrainingStats {
         passes: t.passes,
         spp: t.spp,

@@ -197,6 +197,7 @@ impl GuidedDistance {
             return; // the tail follows the standard exponential
         }
         let mid = self.ray.at(s.start + 0.5 * s.length);
+        counters.field_lookups += 1;
         let Some((incident, mean)) = cache.estimates(mid, self.lookup_u, self.ray.direction) else {
             return;
         };
@@ -417,6 +418,7 @@ pub fn guided_flight(
     // Absorb or scatter, in proportion to what each brings back (the zero-variance choice):
     // emission sigma_a L_e against in-scattered sigma_s L_s.
     let emit = luminance(sigma_a * medium.emission);
+    counters.field_lookups += 1;
     let scatter = if cache.load(x, lookup_u) {
         luminance(sigma_s) * cache.inscattered(ray.direction, medium.phase.mean_cosine())
     } else {
@@ -471,6 +473,7 @@ fn null_collision_flight(
         let x = ray.at(t);
         let c = medium.coefficients(x);
         counters.density_lookups += 1;
+        counters.guided_density_lookups += 1;
         let sigma_s = c.sigma_t * c.albedo;
         let sigma_n = (Spectrum::splat(majorant) - c.sigma_t).max(Spectrum::ZERO);
         let path = beta * weight;
@@ -486,6 +489,7 @@ fn null_collision_flight(
         let mut p_scatter = p_std;
         if alpha > 0.0 && ps > 0.0 && pn > 0.0 {
             if cached.is_none_or(|(at, _, _)| t - at > refresh) {
+                counters.field_lookups += 1;
                 cached = cache.estimates(x, lookup_u, ray.direction).map(|(li, ls)| (t, ls, li));
             }
             if let Some((_, ls, li)) = cached {

@@ -10,7 +10,7 @@
 
 use crate::bsdf::Bsdf;
 use crate::guided::distance::{GuidedEvent, guided_flight};
-use crate::guided::{Components, RadianceCache, window};
+use crate::guided::{Components, PRODUCT_MIN_G, RadianceCache, window};
 use crate::lights::Light;
 use crate::math::{Frame, Ray, Spectrum, luminance, positive, power_heuristic};
 use crate::rng::Sampler;
@@ -174,6 +174,8 @@ fn walk<C: RadianceCache>(
                 let g = phase.mean_cosine();
                 let loaded = guide.any() && ctx.cache.load(p, sampler.next_1d());
                 let product = guide.directions && loaded && ctx.cache.product_hg(dir, g);
+                counters.field_lookups += u64::from(loaded);
+                counters.products += u64::from(product && g.abs() >= PRODUCT_MIN_G);
                 let mix_pdf = |cache: &C, wi: Vec3A| {
                     let pp = phase.eval(dir, wi);
                     if product { alpha * cache.pdf(wi) + (1.0 - alpha) * pp } else { pp }
@@ -254,6 +256,7 @@ fn walk<C: RadianceCache>(
         let wo = frame.to_local(-s.ray.direction);
         let smooth = bsdf.has_smooth_component();
         let loaded = smooth && guide.any() && ctx.cache.load(hit.p, sampler.next_1d());
+        counters.field_lookups += u64::from(loaded);
         let product = guide.directions && loaded && ctx.cache.product_cosine(hit.ns);
         let mix_pdf = |cache: &C, wi: Vec3A| {
             let pb = bsdf.pdf(wo, frame.to_local(wi));

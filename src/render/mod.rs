@@ -20,6 +20,10 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use zerovar_guiding::{Field, FieldConfig, FieldStats, GuidingError, PathRecorder, Sample};
 
+mod select;
+
+pub use select::Selection;
+
 const TILE: u32 = 16;
 
 /// The progress callback: `progress(done, total)` as work completes (samples for a sample
@@ -82,6 +86,9 @@ pub struct GuidingOptions {
     /// Combine the training passes' images with the render's by inverse variance, rather than
     /// discarding them.
     pub combine_training: bool,
+    /// Guide only the 16x16 tiles where a pilot after training finds guiding more efficient
+    /// than unguided sampling (see [`Selection`]); the others render unguided.
+    pub adaptive: bool,
 }
 
 impl Default for GuidingOptions {
@@ -92,8 +99,28 @@ impl Default for GuidingOptions {
             train: TrainBudget::Passes(5),
             field: FieldConfig::default(),
             combine_training: false,
+            adaptive: false,
         }
     }
+}
+
+/// Parses a guiding mode: what [`Components::parse`] takes, or `auto` (alone or in a `+`-list)
+/// for adaptive guiding, which guides everything unless the list names components.
+pub fn parse_guiding(text: &str) -> Option<(Components, bool)> {
+    let mut adaptive = false;
+    let rest: Vec<&str> = text
+        .split('+')
+        .filter(|part| {
+            let auto = part.trim() == "auto";
+            adaptive |= auto;
+            !auto
+        })
+        .collect();
+    if rest.is_empty() {
+        return Some((Components::FULL, true));
+    }
+    let components = Components::parse(&rest.join("+"))?;
+    Some((components, adaptive && components.any()))
 }
 
 /// Validated settings of one render.
@@ -148,6 +175,8 @@ pub struct RenderResult {
     pub threads: usize,
     /// Training, when guiding was on and no field was given.
     pub training: Option<TrainingReport>,
+    /// Which tiles adaptive guiding chose to guide, when it was on.
+    pub selection: Option<Selection>,
     /// Whether the progress callback cancelled the render: `spp` passes were completed and
     /// the image holds exactly those.
     pub cancelled: bool,
@@ -182,28 +211,16 @@ pub fn render(
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
         if !options.guiding.components.any() {
-            return Ok(final_phase(
-                scene,
-                options,
-                None,
-                None,
-                Vec::new(),
-                threads,
-                progress,
-                None,
-            ));
+            return Ok(final_phase(scene, options, None, Vec::new(), threads, progress, None));
         }
         let (field, direct, films, report) = train_in_pool(scene, options, progress)?;
-        Ok(final_phase(
-            scene,
-            options,
-            Some((&field, Some(&direct))),
-            Some(&films),
-            films.clone(),
-            threads,
-            progress,
-            Some(report),
-        ))
+        let guidance = Guidance {
+            field: &field,
+            direct: Some(&direct),
+            estimate: pixel_estimates(&films),
+            guided_tiles: None,
+        };
+        Ok(guided_phase(scene, options, guidance, films, threads, progress, Some(report)))
     })
 }
 
@@ -216,16 +233,8 @@ pub fn render_with_field(
 ) -> Result<RenderResult, RenderError> {
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
-        Ok(final_phase(
-            scene,
-            options,
-            Some((field, None)),
-            None,
-            Vec::new(),
-            threads,
-            progress,
-            None,
-        ))
+        let guidance = Guidance { field, direct: None, estimate: None, guided_tiles: None };
+        Ok(guided_phase(scene, options, guidance, Vec::new(), threads, progress, None))
     })
 }
 
@@ -295,24 +304,22 @@ fn train_in_pool(
         // Each pass draws from its own streams, independent of the render phase's.
         let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
         let pass_start = Instant::now();
-        let Some((_, samples, records)) = render_pass(
-            scene,
-            &settings,
+        let spec = Pass {
+            settings: &settings,
             seed,
-            0,
+            first: 0,
             count,
-            &mut film,
-            Some((&field, Some(&direct))),
-            estimate.as_deref(),
-            true,
-            progress,
-            &|_| {},
-        ) else {
+            field: Some((&field, Some(&direct))),
+            estimate: estimate.as_deref(),
+            record: true,
+            guided_tiles: None,
+        };
+        let Some(out) = render_pass(scene, spec, &mut film, progress, &|_| {}) else {
             return Err(RenderError::Cancelled);
         };
-        field.update(&samples)?;
-        direct = DirectFluence::build(&field, &records);
-        samples_total += samples.len() as u64;
+        field.update(&out.samples)?;
+        direct = DirectFluence::build(&field, &out.records);
+        samples_total += out.samples.len() as u64;
         spp += count;
         films.push(film);
         match limit {
@@ -362,29 +369,88 @@ fn pixel_estimates(films: &[Film]) -> Option<Vec<f32>> {
     Some(out)
 }
 
-#[allow(clippy::too_many_arguments)]
-fn final_phase(
+/// What the render phase is guided by.
+struct Guidance<'a> {
+    field: &'a Field,
+    direct: Option<&'a DirectFluence>,
+    /// Per-pixel estimates for weight windows, from the training images.
+    estimate: Option<Vec<f32>>,
+    /// Per tile, whether it is guided (`None`: every tile).
+    guided_tiles: Option<Vec<bool>>,
+}
+
+/// The render phase with a field: with `adaptive` guiding, a pilot first chooses which tiles
+/// guiding pays in (its time comes out of a time budget).
+fn guided_phase(
     scene: &Scene,
     options: &RenderOptions,
-    field: Option<(&Field, Option<&DirectFluence>)>,
-    training: Option<&[Film]>,
+    mut guidance: Guidance<'_>,
     training_films: Vec<Film>,
     threads: usize,
     progress: &Monitor<'_>,
     report: Option<TrainingReport>,
 ) -> RenderResult {
-    let settings = if field.is_some() {
+    if !options.guiding.adaptive {
+        return final_phase(
+            scene,
+            options,
+            Some(guidance),
+            training_films,
+            threads,
+            progress,
+            report,
+        );
+    }
+    let last_pass = report.as_ref().map_or(16, |r| 1u32 << r.passes.saturating_sub(1));
+    let Some((tiles, selection)) = select::pilot(scene, options, &guidance, last_pass, progress)
+    else {
+        // Cancelled during the pilot: nothing rendered.
+        let mut options = options.clone();
+        options.budget = Budget::Samples(0);
+        return final_phase(scene, &options, None, training_films, threads, progress, report);
+    };
+    guidance.guided_tiles = Some(tiles);
+    let mut options = options.clone();
+    if let Budget::Time(t) = options.budget {
+        let left = t.saturating_sub(Duration::from_secs_f64(selection.seconds));
+        options.budget = Budget::Time(left);
+    }
+    let mut result =
+        final_phase(scene, &options, Some(guidance), training_films, threads, progress, report);
+    result.seconds += selection.seconds;
+    result.selection = Some(selection);
+    result
+}
+
+fn final_phase(
+    scene: &Scene,
+    options: &RenderOptions,
+    guidance: Option<Guidance<'_>>,
+    training_films: Vec<Film>,
+    threads: usize,
+    progress: &Monitor<'_>,
+    report: Option<TrainingReport>,
+) -> RenderResult {
+    let settings = if guidance.is_some() {
         walk_settings(scene, options)
     } else {
         VolPath::from_scene(scene).settings()
     };
-    let estimate = training.and_then(pixel_estimates);
+    let pass = |first: u32, count: u32| Pass {
+        settings: &settings,
+        seed: options.seed,
+        first,
+        count,
+        field: guidance.as_ref().map(|g| (g.field, g.direct)),
+        estimate: guidance.as_ref().and_then(|g| g.estimate.as_deref()),
+        record: false,
+        guided_tiles: guidance.as_ref().and_then(|g| g.guided_tiles.as_deref()),
+    };
     let [w, h] = scene.camera.resolution;
     let mut film = Film::new(w, h);
     let mut counters = Counters::default();
     let start = Instant::now();
     let mut done = 0u32;
-    let est = estimate.as_deref();
     match options.budget {
         Budget::Samples(spp) => {
             // Doubling passes, so a cancelled render still returns whole passes.
@@ -392,25 +458,15 @@ fn final_phase(
             let finished = AtomicU64::new(0);
             while done < spp {
                 let batch = done.max(1).min(spp - done);
-                let Some((c, _, _)) = render_pass(
-                    scene,
-                    &settings,
-                    options.seed,
-                    done,
-                    batch,
-                    &mut film,
-                    field,
-                    est,
-                    false,
-                    progress,
-                    &|n| {
-                        let d = finished.fetch_add(n, Ordering::Relaxed) + n;
-                        progress.report(d, total);
-                    },
-                ) else {
+                let report = |n| {
+                    let d = finished.fetch_add(n, Ordering::Relaxed) + n;
+                    progress.report(d, total);
+                };
+                let Some(out) = render_pass(scene, pass(done, batch), &mut film, progress, &report)
+                else {
                     break;
                 };
-                counters += c;
+                counters += out.counters;
                 done += batch;
             }
         }
@@ -419,22 +475,11 @@ fn final_phase(
             let mut batch = 1u32;
             loop {
                 let pass_start = Instant::now();
-                let Some((c, _, _)) = render_pass(
-                    scene,
-                    &settings,
-                    options.seed,
-                    done,
-                    batch,
-                    &mut film,
-                    field,
-                    est,
-                    false,
-                    progress,
-                    &|_| {},
-                ) else {
+                let Some(out) = render_pass(scene, pass(done, batch), &mut film, progress, &|_| {})
+                else {
                     break;
                 };
-                counters += c;
+                counters += out.counters;
                 done += batch;
                 let elapsed = start.elapsed();
                 progress.report((elapsed.as_millis() as u64).min(total), total);
@@ -464,19 +509,16 @@ fn final_phase(
         counters,
         threads,
         training: report,
+        selection: None,
         cancelled: progress.stopped(),
     }
 }
 
 /// Mean per-pixel variance of a film's pixel means (luminance), the weight's inverse.
 fn image_variance(film: &Film) -> f64 {
-    let mut acc = 0.0;
-    for p in &film.pixels {
-        let n = p.count.max(1) as f64;
-        let mean = luminance(Spectrum::from_array(p.mean())) as f64;
-        acc += ((p.lum_sq / n - mean * mean).max(0.0)) / n;
-    }
-    acc / film.pixels.len().max(1) as f64
+    let total: f64 =
+        film.pixels.iter().map(|p| p.luminance_variance() / f64::from(p.count.max(1))).sum();
+    total / film.pixels.len().max(1) as f64
 }
 
 /// The images of `training` and `last` averaged with weights inversely proportional to their
@@ -508,82 +550,85 @@ fn combine_by_inverse_variance(training: &[Film], last: &Film) -> Vec<[f32; 3]> 
         .collect()
 }
 
-/// What a pass returns: its counters, training samples and direct-fluence records.
-type PassOutput = (Counters, Vec<Sample>, Vec<(Vec3A, f32)>);
-
-/// Adds samples `first .. first + count` of every pixel to `film`; returns the counters and,
-/// when `record`, the training samples and direct-fluence records in tile order. Returns
-/// `None`, leaving `film` untouched, when `monitor` was told to stop during the pass.
-#[allow(clippy::too_many_arguments)]
-fn render_pass(
-    scene: &Scene,
-    settings: &WalkSettings,
+/// One pass over the image: which samples, drawn how.
+#[derive(Clone, Copy)]
+struct Pass<'a> {
+    settings: &'a WalkSettings,
     seed: u64,
+    /// Sample indices `first .. first + count` of every pixel.
     first: u32,
     count: u32,
-    film: &mut Film,
-    field: Option<(&Field, Option<&DirectFluence>)>,
-    estimate: Option<&[f32]>,
+    field: Option<(&'a Field, Option<&'a DirectFluence>)>,
+    /// Per-pixel estimates for weight windows.
+    estimate: Option<&'a [f32]>,
+    /// Record training samples (splitting is then off).
     record: bool,
+    /// Per tile, whether it is guided; `None` guides every tile as `settings` say.
+    guided_tiles: Option<&'a [bool]>,
+}
+
+/// What a pass returns.
+#[derive(Default)]
+struct PassOutput {
+    counters: Counters,
+    /// Counters of each tile, in tile order.
+    tile_counters: Vec<Counters>,
+    /// Training samples in tile order (when recording).
+    samples: Vec<Sample>,
+    /// Direct-fluence records in tile order (when recording).
+    records: Vec<(Vec3A, f32)>,
+}
+
+/// The tiles of a `w x h` image in row-major order.
+fn tiles(w: u32, h: u32) -> Vec<(u32, u32)> {
+    (0..h.div_ceil(TILE)).flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty))).collect()
+}
+
+/// Adds the pass's samples of every pixel to `film`. Returns `None`, leaving `film` untouched,
+/// when `monitor` was told to stop during the pass.
+fn render_pass(
+    scene: &Scene,
+    pass: Pass<'_>,
+    film: &mut Film,
     monitor: &Monitor<'_>,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Option<PassOutput> {
     let [w, h] = scene.camera.resolution;
-    let tiles: Vec<(u32, u32)> = (0..h.div_ceil(TILE))
-        .flat_map(|ty| (0..w.div_ceil(TILE)).map(move |tx| (tx, ty)))
-        .collect();
+    let tiles = tiles(w, h);
+    let unguided = WalkSettings { guide: Components::OFF, ..*pass.settings };
     type TileResult = ((Vec<PixelSum>, Counters, Vec<Sample>), Vec<(Vec3A, f32)>);
     let results: Vec<TileResult> = tiles
         .par_iter()
-        .map(|&(tx, ty)| {
+        .enumerate()
+        .map(|(index, &tile)| {
             if monitor.stopped() {
                 return Default::default(); // the pass is discarded below
             }
-            let out = match field {
-                Some((f, direct)) => {
-                    let mut cache = FieldCache::with_direct(f, direct, record);
-                    let out = render_tile(
-                        scene,
-                        settings,
-                        seed,
-                        (tx, ty),
-                        first,
-                        count,
-                        &mut cache,
-                        estimate,
-                        record,
-                    );
+            let guided = pass.guided_tiles.is_none_or(|g| g[index]);
+            let out = match pass.field {
+                Some((f, direct)) if guided => {
+                    let mut cache = FieldCache::with_direct(f, direct, pass.record);
+                    let out = render_tile(scene, &pass, pass.settings, tile, &mut cache);
                     (out, cache.take_records())
                 }
-                None => (
-                    render_tile(
-                        scene,
-                        settings,
-                        seed,
-                        (tx, ty),
-                        first,
-                        count,
-                        &mut NoCache,
-                        estimate,
-                        record,
-                    ),
-                    Vec::new(),
-                ),
+                _ => {
+                    let settings = if guided { pass.settings } else { &unguided };
+                    (render_tile(scene, &pass, settings, tile, &mut NoCache), Vec::new())
+                }
             };
-            on_tile(out.0.0.len() as u64 * count as u64);
+            on_tile(out.0.0.len() as u64 * pass.count as u64);
             out
         })
         .collect();
     if monitor.stopped() {
         return None;
     }
-    let mut counters = Counters::default();
-    let mut samples = Vec::new();
-    let mut records = Vec::new();
+    let mut out = PassOutput::default();
     for (&(tx, ty), ((sums, c, s), r)) in tiles.iter().zip(results) {
-        counters += c;
-        samples.extend(s);
-        records.extend(r);
+        out.counters += c;
+        out.tile_counters.push(c);
+        out.samples.extend(s);
+        out.records.extend(r);
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = (x0 + TILE).min(w) - x0;
         for (i, s) in sums.iter().enumerate() {
@@ -591,21 +636,17 @@ fn render_pass(
             film.pixels[(y * w + x) as usize].merge(s);
         }
     }
-    Some((counters, samples, records))
+    Some(out)
 }
 
-#[allow(clippy::too_many_arguments)]
 fn render_tile<C: RadianceCache>(
     scene: &Scene,
+    pass: &Pass<'_>,
     settings: &WalkSettings,
-    seed: u64,
     (tx, ty): (u32, u32),
-    first: u32,
-    count: u32,
     cache: &mut C,
-    estimate: Option<&[f32]>,
-    record: bool,
 ) -> (Vec<PixelSum>, Counters, Vec<Sample>) {
+    let Pass { seed, first, count, estimate, record, .. } = *pass;
     let [w, h] = scene.camera.resolution;
     let mut counters = Counters::default();
     let mut recorder = PathRecorder::new();

@@ -1,0 +1,313 @@
+//! Guiding only where it pays (`--guiding auto`). After training, a short pilot renders every
+//! 16x16 tile both guided and unguided, each from streams of its own, and each tile keeps the
+//! strategy with the higher efficiency `1 / (relative variance per sample x cost per sample)`.
+//!
+//! Cost is the pilot's counted work (`Counters`) weighted by per-operation costs, not wall
+//! time, so the choice, and with it the image, depends on the seed alone, whatever the thread
+//! count or the machine's load. The pilot's samples are not used in the image: the choice is
+//! independent of the samples a pixel averages, so each pixel stays an unbiased estimate
+//! whichever strategy its tile got.
+
+use super::{
+    Guidance, Monitor, Pass, RenderOptions, TILE, pixel_estimates, render_pass, tiles,
+    walk_settings,
+};
+use crate::film::Film;
+use crate::guided::Components;
+use crate::integrators::walk::WalkSettings;
+use crate::rng::mix64;
+use crate::scene::Scene;
+use crate::stats::Counters;
+use serde::Serialize;
+use std::time::Instant;
+
+/// Nanoseconds of one thread per counted operation: a least-squares fit (relative error) to
+/// the render times of the nine example and bench scenes, each unguided, fully guided and with
+/// each component alone (45 renders, 1 thread, 8 spp). The fit predicts each scene's cost of
+/// a fully guided sample relative to an unguided one within 35% (README, "Guiding").
+const NS_PER_PATH: f64 = 93.0;
+const NS_PER_SEGMENT: f64 = 91.0;
+const NS_PER_SCATTER: f64 = 253.0;
+const NS_PER_DENSITY_LOOKUP: f64 = 162.0;
+const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 58.0;
+const NS_PER_FIELD_LOOKUP: f64 = 136.0;
+const NS_PER_PRODUCT: f64 = 1630.0;
+
+/// The epsilon of relMSE's denominator, so black pixels do not dominate.
+const EPSILON: f64 = 1e-3;
+
+/// What the pilot of adaptive guiding decided.
+#[derive(Clone, Debug, Serialize)]
+pub struct Selection {
+    /// Tiles of the image.
+    pub tiles: usize,
+    /// Tiles rendered guided.
+    pub guided_tiles: usize,
+    /// Samples per pixel of each pilot (guided and unguided).
+    pub pilot_spp: u32,
+    /// Seconds the pilot took.
+    pub seconds: f64,
+    /// Modelled cost of a guided sample over an unguided one, over the whole image.
+    pub cost_ratio: f64,
+    /// Relative variance of a guided sample over an unguided one, over the whole image.
+    pub variance_ratio: f64,
+}
+
+/// The modelled cost of the work `c` counts, in nanoseconds of one thread.
+pub(crate) fn cost(c: &Counters) -> f64 {
+    NS_PER_PATH * c.paths as f64
+        + NS_PER_SEGMENT * c.segments as f64
+        + NS_PER_SCATTER * (c.medium_scatters + c.surface_scatters) as f64
+        + NS_PER_DENSITY_LOOKUP * (c.density_lookups - c.guided_density_lookups) as f64
+        + NS_PER_GUIDED_DENSITY_LOOKUP * c.guided_density_lookups as f64
+        + NS_PER_FIELD_LOOKUP * c.field_lookups as f64
+        + NS_PER_PRODUCT * c.products as f64
+}
+
+/// Runs the pilot with `guidance`'s field; returns which tiles to guide, or `None` when the
+/// render was cancelled. `last_pass` is the spp of the last training pass, which sizes it.
+pub(super) fn pilot(
+    scene: &Scene,
+    options: &RenderOptions,
+    guidance: &Guidance<'_>,
+    last_pass: u32,
+    monitor: &Monitor<'_>,
+) -> Option<(Vec<bool>, Selection)> {
+    let start = Instant::now();
+    let [w, h] = scene.camera.resolution;
+    let count = (last_pass / 4).clamp(2, 16);
+    let settings = walk_settings(scene, options);
+    let off = WalkSettings { guide: Components::OFF, ..settings };
+    let run = |guided: bool| {
+        let mut film = Film::new(w, h);
+        let pass = Pass {
+            settings: if guided { &settings } else { &off },
+            // Streams of their own, independent of training's and the image's.
+            seed: mix64(options.seed ^ (0x7069_6C6F_7400 + u64::from(guided))),
+            first: 0,
+            count,
+            field: guided.then_some((guidance.field, guidance.direct)),
+            estimate: guidance.estimate.as_deref(),
+            record: false,
+            guided_tiles: None,
+        };
+        render_pass(scene, pass, &mut film, monitor, &|_| {}).map(|o| (film, o.tile_counters))
+    };
+    let (guided, guided_cost) = run(true)?;
+    let (unguided, unguided_cost) = run(false)?;
+    // Relative variance needs each pixel's value, and a pilot's own mean is no good for it: an
+    // outlier inflates the mean it is divided by. The training images' (blurred) estimates
+    // are; without them (a loaded field), the guided pilot's, blurred the same way.
+    let estimate = match &guidance.estimate {
+        Some(e) => e.clone(),
+        None => pixel_estimates(std::slice::from_ref(&guided))?,
+    };
+    let tile_list = tiles(w, h);
+    let measured: Vec<TileMeasure> = tile_list
+        .iter()
+        .enumerate()
+        .map(|(i, &(tx, ty))| {
+            let (x0, y0) = (tx * TILE, ty * TILE);
+            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+            let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (y * w + x) as usize));
+            let (mut guided_variance, mut unguided_variance) = (0.0, 0.0);
+            for p in pixels {
+                let weight = 1.0 / (f64::from(estimate[p]).powi(2) + EPSILON);
+                guided_variance += weight * guided.pixels[p].luminance_variance();
+                unguided_variance += weight * unguided.pixels[p].luminance_variance();
+            }
+            TileMeasure {
+                guided_variance,
+                unguided_variance,
+                guided_cost: cost(&guided_cost[i]),
+                unguided_cost: cost(&unguided_cost[i]),
+            }
+        })
+        .collect();
+    let choice = choose(&smoothed(&measured, w.div_ceil(TILE) as usize));
+    let sum = |f: fn(&TileMeasure) -> f64| measured.iter().map(f).sum::<f64>();
+    let totals = [
+        sum(|m| m.guided_variance),
+        sum(|m| m.unguided_variance),
+        sum(|m| m.guided_cost),
+        sum(|m| m.unguided_cost),
+    ];
+    let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+    let selection = Selection {
+        tiles: choice.len(),
+        guided_tiles: choice.iter().filter(|&&g| g).count(),
+        pilot_spp: count,
+        seconds: start.elapsed().as_secs_f64(),
+        cost_ratio: ratio(totals[2], totals[3]),
+        variance_ratio: ratio(totals[0], totals[1]),
+    };
+    Some((choice, selection))
+}
+
+/// One tile's pilot: relative variance and modelled cost of the pilot's samples, each way.
+#[derive(Clone, Copy, Debug)]
+struct TileMeasure {
+    guided_variance: f64,
+    unguided_variance: f64,
+    guided_cost: f64,
+    unguided_cost: f64,
+}
+
+/// Tiles within this many tiles (a square) pool their pilots for the choice.
+const POOL_RADIUS: usize = 2;
+
+/// Each tile's measures summed over its neighbourhood (`columns` tiles per row). A few samples
+/// per pixel mostly miss the rare bright paths that make unguided sampling noisy, so a single
+/// tile's pilot picks the strategy by chance; pooled over 80x80 pixels it sees them, while
+/// the choice still follows the image's structure (a light shaft, a silver lining).
+fn smoothed(tiles: &[TileMeasure], columns: usize) -> Vec<TileMeasure> {
+    let rows = tiles.len().div_ceil(columns.max(1));
+    (0..tiles.len())
+        .map(|i| {
+            let (x, y) = (i % columns, i / columns);
+            let mut sum = TileMeasure {
+                guided_variance: 0.0,
+                unguided_variance: 0.0,
+                guided_cost: 0.0,
+                unguided_cost: 0.0,
+            };
+            for ny in y.saturating_sub(POOL_RADIUS)..(y + POOL_RADIUS + 1).min(rows) {
+                for nx in x.saturating_sub(POOL_RADIUS)..(x + POOL_RADIUS + 1).min(columns) {
+                    if let Some(m) = tiles.get(ny * columns + nx) {
+                        sum.guided_variance += m.guided_variance;
+                        sum.unguided_variance += m.unguided_variance;
+                        sum.guided_cost += m.guided_cost;
+                        sum.unguided_cost += m.unguided_cost;
+                    }
+                }
+            }
+            sum
+        })
+        .collect()
+}
+
+/// Which tiles to guide. Every tile gets the same samples per pixel, so what counts is the
+/// whole image: its relative variance (the sum over tiles) times its cost (also a sum), the
+/// inverse of efficiency. Minimising `V C` means guiding tile `i` when `dv_i C > dc_i V`
+/// (variance saved `dv`, cost added `dc`) at the optimum's totals, so the candidates are the
+/// sets `{i : dv_i > lambda dc_i}` for `lambda = V / C` from 0 up: a sweep over the tiles'
+/// breakpoints `dv_i / dc_i` evaluates them all, and single-tile flips then polish the best.
+/// Ties go to unguided sampling.
+fn choose(tiles: &[TileMeasure]) -> Vec<bool> {
+    let dv = |m: &TileMeasure| m.unguided_variance - m.guided_variance;
+    let dc = |m: &TileMeasure| m.guided_cost - m.unguided_cost;
+    // At lambda -> 0 every tile that saves variance is in; as lambda grows, a tile that costs
+    // more leaves at dv / dc and one that saves cost but adds variance joins at dv / dc.
+    let mut choice: Vec<bool> = tiles.iter().map(|m| dv(m) > 0.0).collect();
+    let mut events: Vec<(f64, usize)> = tiles
+        .iter()
+        .enumerate()
+        .filter(|(_, m)| (dv(m) > 0.0 && dc(m) > 0.0) || (dv(m) < 0.0 && dc(m) < 0.0))
+        .map(|(i, m)| (dv(m) / dc(m), i))
+        .collect();
+    events.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    let totals = |choice: &[bool]| {
+        tiles.iter().zip(choice).fold((0.0, 0.0), |(v, c), (m, &g)| {
+            if g {
+                (v + m.guided_variance, c + m.guided_cost)
+            } else {
+                (v + m.unguided_variance, c + m.unguided_cost)
+            }
+        })
+    };
+    let (mut v, mut c) = totals(&choice);
+    let (mut best, mut best_events) = (v * c, 0);
+    for (k, &(_, i)) in events.iter().enumerate() {
+        let m = &tiles[i];
+        let sign = if choice[i] { -1.0 } else { 1.0 };
+        choice[i] = !choice[i];
+        v += sign * (m.guided_variance - m.unguided_variance);
+        c += sign * (m.guided_cost - m.unguided_cost);
+        if v * c < best {
+            (best, best_events) = (v * c, k + 1);
+        }
+    }
+    let mut choice: Vec<bool> = tiles.iter().map(|m| dv(m) > 0.0).collect();
+    for &(_, i) in &events[..best_events] {
+        choice[i] = !choice[i];
+    }
+    // Flip single tiles while that helps (the sweep's sets ignore second-order terms).
+    let (mut v, mut c) = totals(&choice);
+    for _ in 0..tiles.len() {
+        let mut improved = false;
+        for (i, m) in tiles.iter().enumerate() {
+            let sign = if choice[i] { -1.0 } else { 1.0 };
+            let (nv, nc) = (v + sign * -dv(m), c + sign * dc(m));
+            if nv * nc < v * c * (1.0 - 1e-12) {
+                choice[i] = !choice[i];
+                (v, c, improved) = (nv, nc, true);
+            }
+        }
+        if !improved {
+            break;
+        }
+    }
+    choice
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tile(guided_variance: f64, unguided_variance: f64, guided_cost: f64) -> TileMeasure {
+        TileMeasure { guided_variance, unguided_variance, guided_cost, unguided_cost: 1.0 }
+    }
+
+    /// The product of the image's variance and cost for a choice, by brute force.
+    fn product(tiles: &[TileMeasure], choice: &[bool]) -> f64 {
+        let pick = |m: &TileMeasure, g: bool| {
+            if g {
+                (m.guided_variance, m.guided_cost)
+            } else {
+                (m.unguided_variance, m.unguided_cost)
+            }
+        };
+        let (v, c) = tiles
+            .iter()
+            .zip(choice)
+            .map(|(m, &g)| pick(m, g))
+            .fold((0.0, 0.0), |(v, c), (dv, dc)| (v + dv, c + dc));
+        v * c
+    }
+
+    #[test]
+    fn guides_only_where_the_image_gains() {
+        // Guiding costs twice as much everywhere; it pays only in the noisy tile.
+        let tiles = [tile(1.0, 1.0, 2.0), tile(1.0, 100.0, 2.0), tile(1.0, 1.1, 2.0)];
+        assert_eq!(choose(&tiles), [false, true, false]);
+        // Cheaper and better: always; worse and dearer: never; a tie: unguided.
+        let tiles = [tile(0.5, 1.0, 0.5), tile(2.0, 1.0, 3.0), tile(1.0, 1.0, 1.0)];
+        assert_eq!(choose(&tiles), [true, false, false]);
+        // Black tiles (no variance either way) stay unguided.
+        assert_eq!(choose(&[tile(0.0, 0.0, 2.0)]), [false]);
+    }
+
+    #[test]
+    fn the_choice_is_the_best_over_all_choices_of_small_images() {
+        // Exhaustive check on pseudo-random 8-tile images: the sweep finds the optimum.
+        let mut state = 0x2545_F491_4F6C_DD1Du64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..200 {
+            let tiles: Vec<TileMeasure> =
+                (0..8).map(|_| tile(next() * 4.0, next() * 4.0, 0.5 + next() * 3.0)).collect();
+            let chosen = product(&tiles, &choose(&tiles));
+            let best = (0..1u32 << 8)
+                .map(|bits| {
+                    let choice: Vec<bool> = (0..8).map(|i| bits >> i & 1 == 1).collect();
+                    product(&tiles, &choice)
+                })
+                .fold(f64::INFINITY, f64::min);
+            assert!(chosen <= best * (1.0 + 1e-9), "sweep {chosen} against the optimum {best}");
+        }
+    }
+}
