@@ -161,6 +161,11 @@ fn lights_match_the_toml_format() {
     <emitter type="directional">
         <transform name="to_world"><lookat origin="0, 0, 0" target="-1, -2, -1" up="0, 1, 0"/></transform>
         <spectrum name="irradiance" value="0.5"/>
+    </emitter>
+    <emitter type="envmap">
+        <string name="filename" value="sky.exr"/>
+        <float name="scale" value="2"/>
+        <transform name="to_world"><rotate y="1" angle="90"/></transform>
     </emitter>"#;
     let toml = r#"
 [camera]
@@ -190,11 +195,22 @@ cutoff_angle = 30
 type = "directional"
 direction = [-1, -2, -1]
 irradiance = 0.5
+
+[[lights]]
+type = "envmap"
+filename = "sky.exr"
+scale = 2
+transform = [{ rotate = { axis = [0, 1, 0], angle = 90 } }]
 "#;
     let camera = r#"<sensor type="perspective"><float name="fov" value="40"/>
         <transform name="to_world"><lookat origin="0, 3, 6" target="0, 0, 0" up="0, 1, 0"/></transform>
         <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="18"/></film>
     </sensor>"#;
+    let sky: Vec<[f32; 3]> =
+        (0..32).map(|i| [0.1 * (i % 8) as f32, 0.05 * (i / 8) as f32, 0.3]).collect();
+    let meta =
+        zerovar::output::ImageMetadata { spp: 1, seconds: 0.0, seed: 0, scene: String::new() };
+    zerovar::output::write_exr(&temp_dir().join("sky.exr"), 8, 4, &sky, &meta).unwrap();
     let text = format!("<scene version=\"3.0.0\">{camera}{body}</scene>");
     let a = crate::common::scene(toml);
     let b = xml("lights.xml", &text, &[]).unwrap();
@@ -345,6 +361,13 @@ fn bad_input_names_the_place_and_the_fix() {
             "thin.xml:6:9",
             &["no thin dielectric (`thindielectric`)"],
         ),
+        (
+            "include",
+            "<shape type=\"sphere\">",
+            "<include filename=\"nothere.xml\"/><shape type=\"sphere\">",
+            "include.xml:5:5",
+            &["<include filename=\"nothere.xml\">: cannot read", "nothere.xml"],
+        ),
         ("ply", "type=\"sphere\"", "type=\"ply\"", "ply.xml:5:5", &["not supported yet", "OBJ"]),
         (
             "pathint",
@@ -410,4 +433,71 @@ fn cli_checks_and_renders_xml_and_fails_cleanly() {
         assert!(!err.contains("panicked") && err.contains("bad-cli.xml:6:9"), "{err}");
         assert!(err.contains("<float> has no attribute `nam`"), "{err}");
     }
+}
+
+#[test]
+fn volumes_and_meshes_match_the_toml_format() {
+    write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let mut albedo = Vec::new();
+    zerovar::media::VolGrid { resolution: [2, 1, 1], channels: 1, data: vec![0.5, 0.9] }
+        .write(&mut albedo)
+        .unwrap();
+    write("albedo.vol", albedo);
+    let box_ = r#"<transform name="to_world"><translate value="-0.5, -0.5, -0.5"/><scale value="2"/></transform>"#;
+    let text = with_camera(
+        r#"<lookat origin="0, 1, 5" target="0, 0, 0" up="0, 1, 0"/>"#,
+        &format!(
+            r#"<medium type="heterogeneous" id="m">
+                <volume type="constvolume" name="sigma_t"><rgb name="value" value="2, 3, 4"/>{box_}</volume>
+                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/>{box_}</volume>
+                <float name="scale" value="0.5"/>
+                <phase type="hg"/>
+            </medium>
+            <shape type="cube"><bsdf type="null"/><ref name="interior" id="m"/></shape>
+            <shape type="obj">
+                <string name="filename" value="tri.obj"/>
+                <transform name="to_world"><translate y="-2"/></transform>
+            </shape>
+            <emitter type="constant"/>"#
+        ),
+    );
+    let toml = r#"
+[camera]
+origin = [0, 1, 5]
+target = [0, 0, 0]
+fov = 50
+fov_axis = "y"
+resolution = [30, 40]
+
+[media.m]
+type = "grid"
+density = 1
+sigma_t = [2, 3, 4]
+albedo = "albedo.vol"
+scale = 0.5
+phase = { type = "hg", g = 0.8 }
+transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }]
+
+[[shapes]]
+type = "cube"
+bsdf = { type = "null" }
+interior = "m"
+
+[[shapes]]
+type = "obj"
+filename = "tri.obj"
+transform = [{ translate = [0, -2, 0] }]
+
+[[lights]]
+type = "constant"
+radiance = 1
+"#;
+    let a = crate::common::scene(toml);
+    let b = xml("volumes.xml", &text, &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(image(&a, 2) == image(&b, 2), "volumes: XML and TOML images differ");
+
+    // An albedo grid in another box than the extinction's is an error.
+    let other = text.replacen("<scale value=\"2\"/>", "<scale value=\"3\"/>", 1);
+    let e = xml("volumes.xml", &other, &[]).unwrap_err().to_string();
+    assert!(e.contains("the albedo grid must fill the same box as sigma_t"), "{e}");
 }

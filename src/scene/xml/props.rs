@@ -138,8 +138,12 @@ impl<'a> Props<'a> {
         let used = self.used.borrow();
         let Some(i) = used.iter().position(|u| !u) else { return Ok(()) };
         let p = &self.obj.props[i];
-        let mut asked = self.asked.borrow().clone();
-        asked.dedup();
+        let mut asked: Vec<&str> = Vec::new();
+        for name in self.asked.borrow().iter() {
+            if !asked.contains(name) {
+                asked.push(name);
+            }
+        }
         let takes = if asked.is_empty() {
             "it takes nothing".to_string()
         } else {

@@ -237,6 +237,12 @@ impl Reader<'_> {
                         "<path> is not supported; give file names relative to the scene file",
                     ));
                 }
+                "ref" if top => {
+                    return Err(pos.err(
+                        "<ref> belongs inside the object that uses the referenced one, not in \
+                         <scene>",
+                    ));
+                }
                 "ref" => {
                     self.attributes(child, &pos, &["id", "name"])?;
                     let id = self.required(child, &pos, "id")?;
