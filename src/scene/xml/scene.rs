@@ -55,8 +55,7 @@ pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
                     match other {
                         "film" | "sampler" => "<sensor>",
                         "rfilter" => "<film>",
-                        "phase" => "<medium>",
-                        _ => "<medium> or <texture>",
+                        _ => "<medium>",
                     }
                 )));
             }
@@ -103,7 +102,10 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
         return Err(p.err("zerovar has only the `perspective` sensor"));
     }
     let Some(fov) = p.float("fov")? else {
-        return Err(p.err("give the field of view as <float name=\"fov\" value=\"...\"/> in degrees (focal_length is not supported)"));
+        return Err(p.err(
+            "give the field of view in degrees as <float name=\"fov\" value=\"...\"/> \
+             (focal_length is not supported)",
+        ));
     };
     let fov_axis = p.string("fov_axis")?;
     let steps = p.transform("to_world")?.unwrap_or(&[]);
@@ -126,8 +128,8 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
         Some(("y", _)) => FovAxis::Y,
         Some(("smaller", _)) if resolution[0] > resolution[1] => FovAxis::Y,
         Some(("smaller", _)) => FovAxis::X,
-        Some(("larger", _)) if resolution[0] < resolution[1] => FovAxis::Y,
-        Some(("larger", _)) => FovAxis::X,
+        Some(("larger", _)) if resolution[0] > resolution[1] => FovAxis::X,
+        Some(("larger", _)) => FovAxis::Y,
         Some((other, prop)) => {
             return Err(prop.pos.err(format!(
                 "fov_axis \"{other}\" is not supported; use x, y, smaller or larger"

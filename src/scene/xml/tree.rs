@@ -173,7 +173,8 @@ impl Reader<'_> {
         let pos = at(root);
         if root.tag_name().name() != "scene" {
             return Err(pos.err(format!(
-                "the root element is <{}>; a Mitsuba scene file holds one <scene version=\"3.0.0\">",
+                "the root element is <{}>; a Mitsuba scene file holds one \
+                 <scene version=\"3.0.0\">",
                 root.tag_name().name()
             )));
         }
@@ -263,7 +264,8 @@ impl Reader<'_> {
                     self.attributes(child, &pos, &["type", "id", "name"])?;
                     let Some(kind) = self.attr(child, &pos, "type")? else {
                         return Err(pos.err(format!(
-                            "<{t}> needs a type attribute naming its plugin, e.g. <{t} type=\"...\">"
+                            "<{t}> needs a type attribute naming its plugin, e.g. \
+                             <{t} type=\"...\">"
                         )));
                     };
                     let id = self.attr(child, &pos, "id")?;
