@@ -274,9 +274,20 @@ fn includes_and_cyclic_includes() {
     std::fs::create_dir_all(dir.join("parts")).unwrap();
     let camera = r#"<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="30"/></sensor></scene>"#;
     std::fs::write(dir.join("parts/camera.xml"), camera).unwrap();
-    let main = "<scene version=\"3.0.0\">\n  <include filename=\"parts/camera.xml\"/>\n</scene>\n";
+    // A file name in an included file: relative to it, or else to the scene file (Mitsuba).
+    std::fs::write(dir.join("near.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(dir.join("parts/far.obj"), "v 0 0 0\nv 2 0 0\nv 0 2 0\nf 1 2 3\n").unwrap();
+    let shapes = r#"<scene version="3.0.0">
+        <shape type="obj"><string name="filename" value="near.obj"/></shape>
+        <shape type="obj"><string name="filename" value="far.obj"/></shape>
+    </scene>"#;
+    std::fs::write(dir.join("parts/shapes.xml"), shapes).unwrap();
+    let main = "<scene version=\"3.0.0\">\n  <include filename=\"parts/camera.xml\"/>\n  \
+                <include filename=\"parts/shapes.xml\"/>\n</scene>\n";
     std::fs::write(dir.join("main.xml"), main).unwrap();
-    assert!(zerovar::scene::load(&dir.join("main.xml"), &[]).is_ok());
+    let s = zerovar::scene::load(&dir.join("main.xml"), &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.shapes.len(), 2);
+    assert_eq!(s.bounds().max.x, 2.0);
 
     let a = "<scene version=\"3.0.0\">\n  <include filename=\"b.xml\"/>\n</scene>\n";
     let b = "<scene version=\"3.0.0\">\n\n  <include filename=\"a.xml\"/>\n</scene>\n";

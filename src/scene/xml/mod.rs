@@ -48,19 +48,22 @@ struct Conv {
 }
 
 impl Conv {
-    /// A file named by property `p` (relative to the file that holds it), as a path relative
-    /// to the scene file's directory; a missing file is an error at the property.
+    /// A file named by property `p`, relative to the file that gives it or else (as Mitsuba
+    /// resolves names) to the scene file, as a path relative to the scene file's directory; a
+    /// missing file is an error at the property.
     fn file(&self, name: &str, p: &Prop) -> Result<String> {
         let dir = p.pos.path.parent().unwrap_or(Path::new(""));
-        let rel = dir.strip_prefix(&self.root_dir).unwrap_or(dir).join(name);
-        let full = self.root_dir.join(&rel);
-        if !full.is_file() {
+        let near = dir.strip_prefix(&self.root_dir).unwrap_or(dir).join(name);
+        let Some(rel) =
+            [near, PathBuf::from(name)].into_iter().find(|r| self.root_dir.join(r).is_file())
+        else {
             return Err(p.pos.err(format!(
-                "`{}`: {} not found; file names are relative to the file that gives them",
+                "`{}`: {} not found; file names are relative to the file that gives them or to \
+                 the scene file",
                 p.name,
-                full.display()
+                dir.join(name).display()
             )));
-        }
+        };
         Ok(rel.to_string_lossy().into_owned())
     }
 }

@@ -129,6 +129,7 @@ pub(super) fn read(
         ids: HashMap::new(),
         sources,
         stack: Vec::new(),
+        root_dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
     };
     let (pos, props) = reader.file(path, source)?;
     Ok(Object { tag: "scene".into(), kind: "scene".into(), id: None, pos, props })
@@ -141,6 +142,8 @@ struct Reader<'s> {
     sources: &'s mut Sources,
     /// Files being read, outermost first, to detect cyclic includes.
     stack: Vec<PathBuf>,
+    /// The scene file's directory.
+    root_dir: PathBuf,
 }
 
 impl Reader<'_> {
@@ -325,7 +328,11 @@ impl Reader<'_> {
     fn include(&mut self, node: Node<'_, '_>, pos: &Pos) -> Result<Vec<Prop>> {
         self.attributes(node, pos, &["filename"])?;
         let name = self.required(node, pos, "filename")?;
-        let file = pos.path.parent().unwrap_or(Path::new("")).join(&name);
+        // Relative to the including file, or else (as Mitsuba resolves it) to the scene's.
+        let mut file = pos.path.parent().unwrap_or(Path::new("")).join(&name);
+        if !file.is_file() && self.root_dir.join(&name).is_file() {
+            file = self.root_dir.join(&name);
+        }
         let text = std::fs::read_to_string(&file).map_err(|e| {
             pos.err(format!("<include filename=\"{name}\">: cannot read {}: {e}", file.display()))
         })?;
