@@ -512,3 +512,53 @@ radiance = 1
     let e = xml("volumes.xml", &other, &[]).unwrap_err().to_string();
     assert!(e.contains("the albedo grid must fill the same box as sigma_t"), "{e}");
 }
+
+#[test]
+fn mitsuba_syntax_details() {
+    let dir = temp_dir().join("syntax");
+    std::fs::create_dir_all(dir.join("meshes")).unwrap();
+    std::fs::write(dir.join("meshes/m.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(dir.join("null.xml"), r#"<scene version="3.0.0"><bsdf type="null"/></scene>"#)
+        .unwrap();
+    // `$ab` takes the longest name it goes on with; one value stands for x, y and z; a lookat
+    // without up picks Mitsuba's perpendicular; a 3x3 matrix is the linear part; <path> adds a
+    // directory; an include may sit inside an object.
+    let text = r#"<scene version="3.0.0">
+        <default name="a" value="0.25"/>
+        <default name="ab" value="0.5"/>
+        <path value="meshes"/>
+        <integrator type="volpath"/>
+        <sensor type="perspective">
+            <float name="fov" value="30"/>
+            <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0"/></transform>
+        </sensor>
+        <shape type="sphere">
+            <point name="center" value="$a"/>
+            <float name="radius" value="$ab"/>
+            <include filename="null.xml"/>
+        </shape>
+        <shape type="obj">
+            <string name="filename" value="m.obj"/>
+            <transform name="to_world">
+                <matrix value="0 -1 0  1 0 0  0 0 1"/>
+                <translate value="0, 0, -3"/>
+            </transform>
+        </shape>
+    </scene>"#;
+    let path = dir.join("syntax.xml");
+    std::fs::write(&path, text).unwrap();
+    let s = zerovar::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(s.surfaces[0].bsdf, zerovar::bsdf::Bsdf::Null));
+    let b = s.bounds();
+    // The sphere spans [-0.25, 0.75] on every axis, the rotated triangle x in [-1, 0].
+    assert!((b.min - Vec3A::new(-1.0, -0.25, -3.0)).abs().max_element() < 1e-6, "{b:?}");
+    assert!((b.max - Vec3A::new(0.75, 1.0, 0.75)).abs().max_element() < 1e-6, "{b:?}");
+    let t = crate::common::scene(
+        "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nup = [1, 0, 0]\nfov = 30\n\
+         resolution = [768, 576]\n",
+    );
+    for film in [Vec2::new(0.0, 0.0), Vec2::new(700.0, 100.0)] {
+        let (a, b) = (t.camera.ray(film), s.camera.ray(film));
+        assert!((a.direction - b.direction).abs().max_element() < 1e-6);
+    }
+}

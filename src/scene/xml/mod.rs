@@ -28,9 +28,10 @@ pub(super) fn parse(
     defines: &[(String, String)],
 ) -> Result<(SceneDesc, Sources)> {
     let mut sources = Sources::default();
-    let root = tree::read(path, source, defines, &mut sources)?;
+    let (root, search) = tree::read(path, source, defines, &mut sources)?;
     let mut conv = Conv {
         root_dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
+        search,
         media: BTreeMap::new(),
         medium_names: HashMap::new(),
     };
@@ -42,27 +43,29 @@ pub(super) fn parse(
 struct Conv {
     /// The scene file's directory, which `build` resolves file names against.
     root_dir: PathBuf,
+    /// Directories added by `<path>`, the last first.
+    search: Vec<PathBuf>,
     media: BTreeMap<String, Spanned<MediumDesc>>,
     /// The name each medium object got, so a medium referenced twice is one medium.
     medium_names: HashMap<*const Object, String>,
 }
 
 impl Conv {
-    /// A file named by property `p`, relative to the file that gives it or else (as Mitsuba
-    /// resolves names) to the scene file, as a path relative to the scene file's directory; a
-    /// missing file is an error at the property.
+    /// A file named by property `p` (see `tree::resolve`), as a path relative to the scene
+    /// file's directory or absolute; a missing file is an error at the property.
     fn file(&self, name: &str, p: &Prop) -> Result<String> {
         let dir = p.pos.path.parent().unwrap_or(Path::new(""));
-        let near = dir.strip_prefix(&self.root_dir).unwrap_or(dir).join(name);
-        let Some(rel) =
-            [near, PathBuf::from(name)].into_iter().find(|r| self.root_dir.join(r).is_file())
-        else {
+        let Some(file) = tree::resolve(name, dir, &self.search, &self.root_dir) else {
             return Err(p.pos.err(format!(
-                "`{}`: {} not found; file names are relative to the file that gives them or to \
-                 the scene file",
+                "`{}`: {} not found; file names are relative to the file that gives them, a \
+                 <path> directory or the scene file",
                 p.name,
                 dir.join(name).display()
             )));
+        };
+        let rel = match file.strip_prefix(&self.root_dir) {
+            Ok(rel) => rel.to_path_buf(),
+            Err(_) => file.canonicalize().unwrap_or(file),
         };
         Ok(rel.to_string_lossy().into_owned())
     }

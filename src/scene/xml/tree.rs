@@ -117,22 +117,25 @@ const PROPERTY_TAGS: &str = "float, integer, boolean, string, rgb, spectrum, poi
                              transform, ref";
 
 /// Reads the scene file `path` (text `source`) and the files it includes into the `<scene>`
-/// object; every file read is added to `sources`.
+/// object and the directories `<path>` elements added, the last first; every file read is
+/// added to `sources`.
 pub(super) fn read(
     path: &Path,
     source: &str,
     defines: &[(String, String)],
     sources: &mut Sources,
-) -> Result<Object> {
+) -> Result<(Object, Vec<PathBuf>)> {
     let mut reader = Reader {
         params: defines.iter().cloned().collect(),
         ids: HashMap::new(),
         sources,
         stack: Vec::new(),
         root_dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
+        search: Vec::new(),
     };
-    let (pos, props) = reader.file(path, source)?;
-    Ok(Object { tag: "scene".into(), kind: "scene".into(), id: None, pos, props })
+    let (pos, props) = reader.file(path, source, true)?;
+    let scene = Object { tag: "scene".into(), kind: "scene".into(), id: None, pos, props };
+    Ok((scene, reader.search))
 }
 
 struct Reader<'s> {
@@ -144,11 +147,14 @@ struct Reader<'s> {
     stack: Vec<PathBuf>,
     /// The scene file's directory.
     root_dir: PathBuf,
+    /// Directories added by `<path>`, the last first.
+    search: Vec<PathBuf>,
 }
 
 impl Reader<'_> {
-    /// Reads one file's `<scene>` and returns its position and children.
-    fn file(&mut self, path: &Path, source: &str) -> Result<(Pos, Vec<Prop>)> {
+    /// Reads one file's `<scene>` and returns its position and children; `top` when they are
+    /// the scene's own (not included inside an object).
+    fn file(&mut self, path: &Path, source: &str, top: bool) -> Result<(Pos, Vec<Prop>)> {
         let base = self.sources.push(path.to_path_buf(), source.to_string());
         let path: Rc<Path> = Rc::from(path);
         let doc = roxmltree::Document::parse(source).map_err(|e| {
@@ -194,7 +200,7 @@ impl Reader<'_> {
                 return Err(pos.err("<scene> needs a version attribute, e.g. version=\"3.0.0\""));
             }
         }
-        let props = self.children(root, &at, true)?;
+        let props = self.children(root, &at, top)?;
         Ok((pos, props))
     }
 
@@ -222,7 +228,7 @@ impl Reader<'_> {
             let pos = at(child);
             let tag = child.tag_name().name();
             let new: Vec<Prop> = match tag {
-                "default" | "include" | "path" if !top => {
+                "default" | "path" if !top => {
                     return Err(pos.err(format!(
                         "<{tag}> belongs directly inside <scene>, not inside <{}>",
                         node.tag_name().name()
@@ -235,11 +241,19 @@ impl Reader<'_> {
                     self.params.entry(name).or_insert(value);
                     vec![]
                 }
-                "include" => self.include(child, &pos)?,
+                "include" => self.include(child, &pos, top)?,
                 "path" => {
-                    return Err(pos.err(
-                        "<path> is not supported; give file names relative to the scene file",
-                    ));
+                    self.attributes(child, &pos, &["value"])?;
+                    let value = self.required(child, &pos, "value")?;
+                    let dir = pos.path.parent().unwrap_or(Path::new("")).join(&value);
+                    if !dir.is_dir() {
+                        return Err(pos.err(format!(
+                            "<path value=\"{value}\">: {} is not a directory",
+                            dir.display()
+                        )));
+                    }
+                    self.search.insert(0, dir);
+                    vec![]
                 }
                 "ref" if top => {
                     return Err(pos.err(
@@ -325,14 +339,12 @@ impl Reader<'_> {
         Ok(props)
     }
 
-    fn include(&mut self, node: Node<'_, '_>, pos: &Pos) -> Result<Vec<Prop>> {
+    fn include(&mut self, node: Node<'_, '_>, pos: &Pos, top: bool) -> Result<Vec<Prop>> {
         self.attributes(node, pos, &["filename"])?;
         let name = self.required(node, pos, "filename")?;
-        // Relative to the including file, or else (as Mitsuba resolves it) to the scene's.
-        let mut file = pos.path.parent().unwrap_or(Path::new("")).join(&name);
-        if !file.is_file() && self.root_dir.join(&name).is_file() {
-            file = self.root_dir.join(&name);
-        }
+        let dir = pos.path.parent().unwrap_or(Path::new(""));
+        let file =
+            resolve(&name, dir, &self.search, &self.root_dir).unwrap_or_else(|| dir.join(&name));
         let text = std::fs::read_to_string(&file).map_err(|e| {
             pos.err(format!("<include filename=\"{name}\">: cannot read {}: {e}", file.display()))
         })?;
@@ -350,7 +362,7 @@ impl Reader<'_> {
             )));
         }
         self.stack.push(key);
-        let (_, props) = self.file(&file, &text)?;
+        let (_, props) = self.file(&file, &text, top)?;
         self.stack.pop();
         Ok(props)
     }
@@ -377,11 +389,7 @@ impl Reader<'_> {
                 }
                 "scale" => {
                     self.attributes(child, &pos, &["x", "y", "z", "value"])?;
-                    let uniform = self.attr(child, &pos, "value")?.and_then(|v| number(&v));
-                    TransformStep::Scale(match uniform {
-                        Some(s) => Rgb::Grey(s),
-                        None => Rgb::Rgb(self.xyz(child, &pos, 1.0)?.into()),
-                    })
+                    TransformStep::Scale(Rgb::Rgb(self.xyz(child, &pos, 1.0)?.into()))
                 }
                 "rotate" => {
                     self.attributes(child, &pos, &["x", "y", "z", "value", "angle"])?;
@@ -395,29 +403,44 @@ impl Reader<'_> {
                 "matrix" => {
                     self.attributes(child, &pos, &["value"])?;
                     let v = self.required(child, &pos, "value")?;
-                    match numbers(&v) {
-                        Some(n) if n.len() == 16 => {
-                            TransformStep::Matrix(std::array::from_fn(|r| {
-                                std::array::from_fn(|c| n[4 * r + c])
-                            }))
-                        }
+                    let n = numbers(&v).unwrap_or_default();
+                    // Row by row: a 4x4 matrix, or the linear part of one (3x3).
+                    let k = match n.len() {
+                        16 => 4,
+                        9 => 3,
                         _ => {
                             return Err(pos.err(
-                                "<matrix value=\"...\"> needs 16 numbers, a 4x4 matrix row by row",
+                                "<matrix value=\"...\"> needs 16 numbers (a 4x4 matrix row by row) \
+                                 or 9 (3x3)",
                             ));
                         }
-                    }
+                    };
+                    TransformStep::Matrix(std::array::from_fn(|r| {
+                        std::array::from_fn(|c| match (r < k && c < k, r == c) {
+                            (true, _) => n[k * r + c],
+                            (false, diagonal) => f32::from(u8::from(diagonal)),
+                        })
+                    }))
                 }
                 "lookat" => {
                     self.attributes(child, &pos, &["origin", "target", "up"])?;
                     let mut v = [Vec3::ZERO; 3];
                     for (slot, name) in v.iter_mut().zip(["origin", "target", "up"]) {
-                        let text = self.required(child, &pos, name)?;
+                        let text = match self.attr(child, &pos, name)? {
+                            Some(t) => t,
+                            None if name == "up" => continue,
+                            None => self.required(child, &pos, name)?,
+                        };
                         *slot = vec3(&text).ok_or_else(|| {
                             pos.err(format!("<lookat {name}=\"{text}\">: needs three numbers"))
                         })?;
                     }
-                    TransformStep::Lookat { origin: v[0], target: v[1], up: v[2] }
+                    let [origin, target, mut up] = v;
+                    if up == Vec3::ZERO {
+                        // As Mitsuba: a direction perpendicular to the view.
+                        up = perpendicular((target - origin).normalize_or_zero());
+                    }
+                    TransformStep::Lookat { origin, target, up }
                 }
                 other => {
                     return Err(pos.err(format!(
@@ -475,16 +498,21 @@ impl Reader<'_> {
         })
     }
 
-    /// A vector from `value="x, y, z"` or from `x`, `y`, `z` attributes defaulting to `missing`.
+    /// A vector from `value` (three numbers, or one for all three) or from `x`, `y`, `z`
+    /// attributes defaulting to `missing`.
     fn xyz(&mut self, node: Node<'_, '_>, pos: &Pos, missing: f32) -> Result<Vec3> {
         let tag = node.tag_name().name();
         if let Some(text) = self.attr(node, pos, "value")? {
             if ["x", "y", "z"].iter().any(|a| node.attribute(*a).is_some()) {
                 return Err(pos.err(format!("<{tag}>: give either value or x, y, z, not both")));
             }
-            return vec3(&text).ok_or_else(|| {
-                pos.err(format!("<{tag} value=\"{text}\">: the value must be three numbers"))
-            });
+            return match numbers(&text).as_deref() {
+                Some([v]) => Ok(Vec3::splat(*v)),
+                Some([x, y, z]) => Ok(Vec3::new(*x, *y, *z)),
+                _ => Err(pos.err(format!(
+                    "<{tag} value=\"{text}\">: the value must be three numbers (or one)"
+                ))),
+            };
         }
         let mut v = [missing; 3];
         for (slot, a) in v.iter_mut().zip(["x", "y", "z"]) {
@@ -518,22 +546,24 @@ impl Reader<'_> {
         while let Some(i) = rest.find('$') {
             out.push_str(&rest[..i]);
             let after = &rest[i + 1..];
-            let len = after
-                .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
-                .unwrap_or(after.len());
-            if len == 0 {
-                out.push('$');
-            } else {
+            // As Mitsuba: the longest parameter name the text goes on with.
+            let Some((key, value)) = self
+                .params
+                .iter()
+                .filter(|(k, _)| !k.is_empty() && after.starts_with(k.as_str()))
+                .max_by_key(|(k, _)| k.len())
+            else {
+                let len = after
+                    .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                    .unwrap_or(after.len());
                 let key = &after[..len];
-                let Some(value) = self.params.get(key) else {
-                    return Err(pos.err(format!(
-                        "`${key}` in {name}=\"{text}\" names no <default> (nor -D {key}=...); \
-                         add <default name=\"{key}\" value=\"...\"/> before it"
-                    )));
-                };
-                out.push_str(value);
-            }
-            rest = &after[len..];
+                return Err(pos.err(format!(
+                    "`${key}` in {name}=\"{text}\" names no <default> (nor -D {key}=...); \
+                     add <default name=\"{key}\" value=\"...\"/> before it"
+                )));
+            };
+            out.push_str(value);
+            rest = &after[key.len()..];
         }
         out.push_str(rest);
         Ok(Some(out))
@@ -546,6 +576,21 @@ impl Reader<'_> {
     }
 }
 
+/// Where a file name given in directory `dir` points: relative to `dir`, or else (as Mitsuba
+/// resolves names) to a `<path>` directory or the scene file's directory.
+pub(super) fn resolve(
+    name: &str,
+    dir: &Path,
+    search: &[PathBuf],
+    root_dir: &Path,
+) -> Option<PathBuf> {
+    std::iter::once(dir)
+        .chain(search.iter().map(PathBuf::as_path))
+        .chain(std::iter::once(root_dir))
+        .map(|d| d.join(name))
+        .find(|f| f.is_file())
+}
+
 fn number(text: &str) -> Option<f32> {
     text.trim().parse().ok()
 }
@@ -556,6 +601,15 @@ fn numbers(text: &str) -> Option<Vec<f32>> {
         .filter(|t| !t.is_empty())
         .map(|t| t.parse().ok())
         .collect()
+}
+
+/// The first tangent of the orthonormal basis Mitsuba builds around a unit vector (Duff et
+/// al. 2017, "Building an Orthonormal Basis, Revisited").
+fn perpendicular(n: Vec3) -> Vec3 {
+    let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x)
 }
 
 fn vec3(text: &str) -> Option<Vec3> {
