@@ -402,6 +402,10 @@ fn bad_input_names_the_place_and_the_fix() {
             &["inside the <shape>"],
         ),
     ];
+    let sky = "<emitter type=\"constant\"/>";
+    let e = xml("sky.xml", &GOOD.replace("</scene>", &format!("{sky}\n{sky}\n</scene>")), &[]);
+    let e = e.unwrap_err().to_string();
+    assert!(e.contains("sky.xml:9:1: <emitter type=\"constant\">: a second environment"), "{e}");
     for (name, from, to, place, needles) in cases {
         assert!(GOOD.contains(from), "{name}");
         let file = format!("{name}.xml");

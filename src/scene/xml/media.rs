@@ -111,6 +111,12 @@ impl Conv {
         }
         d.scale = p.float("scale")?;
         d.phase = p.object("phase")?.map(phase).transpose()?;
+        // Sampling choices that leave the expected image alone: zerovar makes its own.
+        p.boolean("sample_emitters")?;
+        if d.kind == "grid" {
+            p.integer("majorant_resolution_factor")?;
+            p.float("majorant_factor")?;
+        }
         p.finish()?;
         Ok(d)
     }

@@ -7,7 +7,7 @@ use super::props::Props;
 use super::tree::{Object, Value};
 use super::{Conv, Result, compose, spanned};
 use crate::camera::FovAxis;
-use crate::scene::desc::{CameraDesc, RenderDesc, SceneDesc, TransformStep};
+use crate::scene::desc::{CameraDesc, LightDesc, RenderDesc, SceneDesc, TransformStep};
 use glam::Vec3;
 use std::rc::Rc;
 
@@ -37,7 +37,20 @@ pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
                 *slot = Some(o);
             }
             "shape" => shapes.push(super::shapes::shape(conv, o)?),
-            "emitter" => lights.push(super::shapes::light(conv, o)?),
+            "emitter" => {
+                let light = super::shapes::light(conv, o)?;
+                let environment = |l: &toml::Spanned<LightDesc>| {
+                    matches!(l.get_ref().kind.as_str(), "constant" | "envmap")
+                };
+                if environment(&light) && lights.iter().any(environment) {
+                    return Err(o.pos.err(format!(
+                        "{}: a second environment emitter; Mitsuba takes one (constant or \
+                         envmap) per scene",
+                        o.describe()
+                    )));
+                }
+                lights.push(light);
+            }
             // Definitions for `<ref>`: checked here, used where referenced.
             "bsdf" => {
                 super::shapes::bsdf(o)?;
