@@ -319,10 +319,10 @@ impl Reader<'_> {
                 }
                 other => {
                     return Err(pos.err(format!(
-                        "unknown element <{other}>; supported are the objects {} and the \
-                         properties {PROPERTY_TAGS}{}",
+                        "unknown element <{other}>; use an object ({}), a property \
+                         ({PROPERTY_TAGS}), {}",
                         OBJECT_TAGS.join(", "),
-                        if top { " (and <default>, <include> in <scene>)" } else { "" }
+                        if top { "<default>, <path> or <include>" } else { "or <include>" }
                     )));
                 }
             };
