@@ -272,7 +272,8 @@ fn defaults_overrides_and_refs() {
 fn includes_and_cyclic_includes() {
     let dir = temp_dir().join("include");
     std::fs::create_dir_all(dir.join("parts")).unwrap();
-    let camera = r#"<scene version="3.0.0"><sensor type="perspective"><float name="fov" value="30"/></sensor></scene>"#;
+    let camera =
+        r#"<scene><sensor type="perspective"><float name="fov" value="30"/></sensor></scene>"#;
     std::fs::write(dir.join("parts/camera.xml"), camera).unwrap();
     // A file name in an included file: relative to it, or else to the scene file (Mitsuba).
     std::fs::write(dir.join("near.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();

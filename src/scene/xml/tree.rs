@@ -196,6 +196,8 @@ impl Reader<'_> {
                      are read; upgrade older scenes with Mitsuba first"
                 )));
             }
+            // Included files may leave the version out, as in Mitsuba.
+            None if !self.stack.is_empty() => {}
             None => {
                 return Err(pos.err("<scene> needs a version attribute, e.g. version=\"3.0.0\""));
             }
