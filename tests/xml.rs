@@ -389,6 +389,13 @@ fn bad_input_names_the_place_and_the_fix() {
             &["`path` integrator", "volpath"],
         ),
         (
+            "depth",
+            "<shape type=\"sphere\">",
+            "<integrator type=\"path\"><integer name=\"max_depth\" value=\"-2\"/></integrator>\n<shape type=\"sphere\">",
+            "depth.xml:5:5",
+            &["<integrator type=\"path\">: max_depth -2 must be -1 (unlimited) or a depth >= 0"],
+        ),
+        (
             "version",
             "version=\"3.0.0\"",
             "version=\"0.6.0\"",

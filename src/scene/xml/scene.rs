@@ -260,6 +260,9 @@ fn integrator(o: &Rc<Object>) -> Result<(&'static str, i64, u32)> {
         return Err(p.err("hide_emitters = true is not supported; remove it"));
     }
     p.finish()?;
+    if !(-1..=i64::from(u32::MAX)).contains(&max_depth) {
+        return Err(p.err(format!("max_depth {max_depth} must be -1 (unlimited) or a depth >= 0")));
+    }
     let rr_depth = u32::try_from(rr_depth)
         .ok()
         .filter(|d| *d > 0)
