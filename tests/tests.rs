@@ -9,3 +9,4 @@ mod render;
 mod single_scatter;
 mod tracking;
 mod transmittance;
+mod xml;

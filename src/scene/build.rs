@@ -2,7 +2,7 @@
 //! an error naming the file, line and element, and the fix.
 
 use super::desc::*;
-use super::{RenderSettings, Scene, SceneError, Surface};
+use super::{RenderSettings, Scene, SceneError, Sources, Surface};
 use crate::accel::Bvh;
 use crate::bsdf::{Bsdf, Texture};
 use crate::camera::Camera;
@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 /// The file being built and the element being looked at, for error messages.
 struct Ctx<'a> {
     path: &'a Path,
-    source: &'a str,
+    sources: &'a Sources,
     offset: usize,
     place: String,
 }
@@ -34,13 +34,7 @@ impl Ctx<'_> {
     }
 
     fn err<T>(&self, message: impl Into<String>) -> Result<T> {
-        Err(SceneError::invalid(
-            self.path,
-            self.source,
-            Some(self.offset),
-            &self.place,
-            &message.into(),
-        ))
+        Err(self.sources.invalid(self.offset, &self.place, &message.into()))
     }
 
     fn file(&self, name: &str) -> PathBuf {
@@ -92,47 +86,47 @@ impl Ctx<'_> {
     }
 
     fn transform(&self, steps: &[TransformStep]) -> Result<Transform> {
-        let mut t = Transform::IDENTITY;
-        for (i, step) in steps.iter().enumerate() {
-            let next = match step {
-                TransformStep::Translate(v) => {
-                    self.finite("translate", &v.to_array())?;
-                    Some(Transform::translate(*v))
-                }
+        for step in steps {
+            match step {
+                TransformStep::Translate(v) => self.finite("translate", &v.to_array())?,
                 TransformStep::Rotate { axis, angle } => {
-                    self.finite("rotate", &[axis.x, axis.y, axis.z, *angle])?;
-                    Transform::rotate(*axis, *angle)
+                    self.finite("rotate", &[axis.x, axis.y, axis.z, *angle])?
                 }
-                TransformStep::Scale(s) => {
-                    let c = s.channels();
-                    self.finite("scale", &c)?;
-                    Transform::scale(Vec3::from_array(c))
-                }
-                TransformStep::Matrix(rows) => {
-                    self.finite("matrix", rows.as_flattened())?;
-                    Transform::from_rows(*rows)
-                }
-                TransformStep::Lookat { origin, target, up } => {
-                    Transform::look_at(*origin, *target, *up)
-                }
-            };
-            match next {
-                Some(n) => t = t.then(&n),
-                None => {
-                    return self.err(format!(
-                        "transform step {} is degenerate (zero axis or scale, origin = target, up \
-                         parallel to the view, or a matrix that is singular or not affine)",
-                        i + 1
-                    ));
-                }
+                TransformStep::Scale(s) => self.finite("scale", &s.channels())?,
+                TransformStep::Matrix(rows) => self.finite("matrix", rows.as_flattened())?,
+                TransformStep::Lookat { .. } => {}
             }
         }
-        Ok(t)
+        compose(steps).or_else(|i| {
+            self.err(format!(
+                "transform step {} is degenerate (zero axis or scale, origin = target, up \
+                 parallel to the view, or a matrix that is singular or not affine)",
+                i + 1
+            ))
+        })
     }
 }
 
-pub(super) fn build(path: &Path, source: &str, desc: SceneDesc) -> Result<Scene> {
-    let mut cx = Ctx { path, source, offset: 0, place: String::new() };
+/// A transform list composed in document order; `Err(i)` names the first degenerate step.
+pub(super) fn compose(steps: &[TransformStep]) -> std::result::Result<Transform, usize> {
+    let mut t = Transform::IDENTITY;
+    for (i, step) in steps.iter().enumerate() {
+        let next = match step {
+            TransformStep::Translate(v) => Some(Transform::translate(*v)),
+            TransformStep::Rotate { axis, angle } => Transform::rotate(*axis, *angle),
+            TransformStep::Scale(s) => Transform::scale(Vec3::from_array(s.channels())),
+            TransformStep::Matrix(rows) => Transform::from_rows(*rows),
+            TransformStep::Lookat { origin, target, up } => {
+                Transform::look_at(*origin, *target, *up)
+            }
+        };
+        t = t.then(&next.ok_or(i)?);
+    }
+    Ok(t)
+}
+
+pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<Scene> {
+    let mut cx = Ctx { path, sources, offset: 0, place: String::new() };
 
     let mut media = Vec::new();
     let mut names = HashMap::new();
@@ -401,8 +395,15 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
         }
         "grid" => {
             cx.only("grid media", &[("noise", d.noise.is_some())])?;
-            let file = cx.file(&cx.required("density", &d.density)?);
-            let density = read_grid(cx, &file, &[1])?;
+            let density = match cx.required("density", &d.density)? {
+                DensityDesc::File(f) => read_grid(cx, &cx.file(&f), &[1])?,
+                DensityDesc::Constant(v) => {
+                    if !(v >= 0.0 && v.is_finite()) {
+                        return cx.err(format!("density {v} must be finite and non-negative"));
+                    }
+                    Grid::new(VolGrid { resolution: [1, 1, 1], channels: 1, data: vec![v] })
+                }
+            };
             let albedo = match &d.albedo {
                 Some(AlbedoDesc::File(f)) => {
                     AlbedoField::Grid(read_grid(cx, &cx.file(f), &[1, 3])?)

@@ -224,8 +224,8 @@ pub struct MediumDesc {
     pub albedo: Option<AlbedoDesc>,
     /// Multiplies the extinction.
     pub scale: Option<f32>,
-    /// Grid: the density `.vol` file.
-    pub density: Option<String>,
+    /// Grid: the density, a `.vol` file or a constant filling the unit cube.
+    pub density: Option<DensityDesc>,
     /// Noise: cloud parameters.
     pub noise: Option<crate::media::NoiseCloud>,
     /// Grid, noise: places the unit cube.
@@ -235,6 +235,16 @@ pub struct MediumDesc {
     pub phase: Option<PhaseDesc>,
     /// Emitted radiance per unit absorption.
     pub emission: Option<Rgb>,
+}
+
+/// A grid medium's density: a `.vol` file, or one value filling the unit cube.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(untagged)]
+pub enum DensityDesc {
+    /// The same density everywhere in the cube.
+    Constant(f32),
+    /// A one-channel `.vol` file.
+    File(String),
 }
 
 /// A constant albedo or a grid file.

@@ -1,4 +1,4 @@
-//! Reading a scene file: `[defaults]`, `-D` overrides and `"$name"` substitution, then the
+//! Reading a TOML scene file: `[defaults]`, `-D` overrides and `"$name"` substitution, then the
 //! typed parse.
 //!
 //! Substitution is textual: every `"$name"` token is replaced by the TOML form of the default's
@@ -8,16 +8,6 @@
 use super::SceneError;
 use super::desc::SceneDesc;
 use std::path::Path;
-
-/// Reads `path`, applies `defines` (`name=value` pairs overriding `[defaults]`) and parses it.
-pub(super) fn read(
-    path: &Path,
-    defines: &[(String, String)],
-) -> Result<(SceneDesc, String), SceneError> {
-    let source = std::fs::read_to_string(path)
-        .map_err(|error| SceneError::Io { path: path.to_path_buf(), error })?;
-    parse(path, &source, defines).map(|d| (d, source))
-}
 
 /// Parses scene text; `path` names the file in errors.
 pub(super) fn parse(

@@ -8,6 +8,7 @@
 mod build;
 pub mod desc;
 mod load;
+mod xml;
 
 use crate::accel::Bvh;
 use crate::bsdf::Bsdf;
@@ -95,6 +96,35 @@ impl SceneError {
     }
 }
 
+/// The text a description was parsed from, so that a span's byte offset names a file and a
+/// line: one TOML file, or an XML scene and the files it includes, laid end to end (a file's
+/// spans are offset by the lengths of the files before it).
+#[derive(Debug, Default)]
+pub(crate) struct Sources {
+    files: Vec<(PathBuf, String)>,
+}
+
+impl Sources {
+    /// Adds a file and returns the offset its spans start at.
+    pub(crate) fn push(&mut self, path: PathBuf, text: String) -> usize {
+        let base = self.files.iter().map(|(_, t)| t.len()).sum();
+        self.files.push((path, text));
+        base
+    }
+
+    /// An `Invalid` error at `offset`, in whichever file holds it.
+    pub(crate) fn invalid(&self, offset: usize, place: &str, message: &str) -> SceneError {
+        let mut base = 0;
+        for (i, (path, text)) in self.files.iter().enumerate() {
+            if offset < base + text.len() || i + 1 == self.files.len() {
+                return SceneError::invalid(path, text, Some(offset - base), place, message);
+            }
+            base += text.len();
+        }
+        SceneError::invalid(Path::new(""), "", None, place, message)
+    }
+}
+
 /// A shape's surface properties.
 #[derive(Clone, Debug)]
 pub struct Surface {
@@ -154,20 +184,31 @@ pub struct Scene {
     pub settings: RenderSettings,
 }
 
-/// Loads, validates and compiles a scene file. `defines` override `[defaults]` entries.
+/// Loads, validates and compiles a scene file: TOML, or a Mitsuba 3 scene if the name ends in
+/// `.xml`. `defines` override `[defaults]` (TOML) or `<default>` (XML) entries.
 pub fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
-    let (desc, source) = load::read(path, defines)?;
-    build::build(path, &source, desc)
+    let source = std::fs::read_to_string(path)
+        .map_err(|error| SceneError::Io { path: path.to_path_buf(), error })?;
+    load_str(path, &source, defines)
 }
 
-/// Compiles scene text; `path` names the file and anchors relative paths.
+/// Compiles scene text; `path` names the file, anchors relative paths and, ending in `.xml`,
+/// selects the Mitsuba 3 format.
 pub fn load_str(
     path: &Path,
     source: &str,
     defines: &[(String, String)],
 ) -> Result<Scene, SceneError> {
-    let desc = load::parse(path, source, defines)?;
-    build::build(path, source, desc)
+    let is_xml = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("xml"));
+    let (desc, sources) = if is_xml {
+        xml::parse(path, source, defines)?
+    } else {
+        let desc = load::parse(path, source, defines)?;
+        let mut sources = Sources::default();
+        sources.push(path.to_path_buf(), source.to_string());
+        (desc, sources)
+    };
+    build::build(path, &sources, desc)
 }
 
 impl Scene {

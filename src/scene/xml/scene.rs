@@ -1,0 +1,271 @@
+//! The top of a Mitsuba scene: the objects `<scene>` holds, the perspective sensor with its
+//! film, reconstruction filter, sampler and medium, and the integrator, mapped onto the
+//! camera and render settings of a `SceneDesc`. Defaults are Mitsuba's (768x576 film, 4
+//! samples, the `path` integrator, max_depth -1, rr_depth 5).
+
+use super::props::Props;
+use super::tree::{Object, Value};
+use super::{Conv, Result, compose, spanned};
+use crate::camera::FovAxis;
+use crate::scene::desc::{CameraDesc, LightDesc, RenderDesc, SceneDesc, TransformStep};
+use glam::Vec3;
+use std::rc::Rc;
+
+/// The plugins the sensor and integrator take, for messages.
+const INTEGRATORS: &str = "path, volpath, volpathmis or moment";
+
+pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
+    let (mut sensor, mut integrator) = (None, None);
+    let (mut shapes, mut lights) = (Vec::new(), Vec::new());
+    for p in &root.props {
+        let Value::Object(o) = &p.value else {
+            return Err(p.pos.err(format!(
+                "<scene> holds plugins, not properties such as {} `{}`",
+                p.value.tag(),
+                p.name
+            )));
+        };
+        match o.tag.as_str() {
+            "sensor" | "integrator" => {
+                let slot = if o.tag == "sensor" { &mut sensor } else { &mut integrator };
+                if slot.is_some() {
+                    return Err(o.pos.err(format!(
+                        "a second <{}>; zerovar renders a scene with one <{}>",
+                        o.tag, o.tag
+                    )));
+                }
+                *slot = Some(o);
+            }
+            "shape" => shapes.push(super::shapes::shape(conv, o)?),
+            "emitter" => {
+                let light = super::shapes::light(conv, o)?;
+                let environment = |l: &toml::Spanned<LightDesc>| {
+                    matches!(l.get_ref().kind.as_str(), "constant" | "envmap")
+                };
+                if environment(&light) && lights.iter().any(environment) {
+                    return Err(o.pos.err(format!(
+                        "{}: a second environment emitter; Mitsuba takes one (constant or \
+                         envmap) per scene",
+                        o.describe()
+                    )));
+                }
+                lights.push(light);
+            }
+            // Definitions for `<ref>`: checked here, used where referenced.
+            "bsdf" => {
+                super::shapes::bsdf(o)?;
+            }
+            "texture" => {
+                super::shapes::texture(o)?;
+            }
+            "medium" => {
+                conv.medium(o)?;
+            }
+            other => {
+                return Err(o.pos.err(format!(
+                    "{} does not belong directly in <scene>; put it inside the {} that uses it",
+                    o.describe(),
+                    match other {
+                        "film" | "sampler" => "<sensor>",
+                        "rfilter" => "<film>",
+                        _ => "<medium>",
+                    }
+                )));
+            }
+        }
+    }
+    let Some(sensor) = sensor else {
+        return Err(root.pos.err(
+            "the scene has no <sensor>; add <sensor type=\"perspective\"> with a fov and a \
+             to_world transform",
+        ));
+    };
+    let (camera, render) = camera(conv, sensor)?;
+    let (kind, max_depth, rr_depth) = match integrator {
+        Some(o) => self::integrator(o)?,
+        None => ("path", -1, 5),
+    };
+    if kind == "path" {
+        let null =
+            shapes.iter().any(|s| s.get_ref().bsdf.as_ref().is_some_and(|b| b.kind == "null"));
+        if !conv.media.is_empty() || null {
+            let pos = integrator.map_or(&root.pos, |o| &o.pos);
+            return Err(pos.err(
+                "Mitsuba's `path` integrator (the default when there is no <integrator>) \
+                 ignores media and null surfaces, which zerovar always renders; use \
+                 <integrator type=\"volpath\">",
+            ));
+        }
+    }
+    Ok(SceneDesc {
+        defaults: toml::Table::new(),
+        camera,
+        render: RenderDesc { max_depth, rr_depth, ..render },
+        medium: None,
+        media: std::mem::take(&mut conv.media),
+        shapes,
+        lights,
+    })
+}
+
+/// The perspective sensor: the camera, and the sampler's spp and seed.
+fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>, RenderDesc)> {
+    let p = Props::new(o);
+    if o.kind != "perspective" {
+        return Err(p.err("zerovar has only the `perspective` sensor"));
+    }
+    let Some(fov) = p.float("fov")? else {
+        return Err(p.err(
+            "give the field of view in degrees as <float name=\"fov\" value=\"...\"/> \
+             (focal_length is not supported)",
+        ));
+    };
+    let fov_axis = p.string("fov_axis")?;
+    let steps = p.transform("to_world")?.unwrap_or(&[]);
+    // Accepted as in Mitsuba; zerovar does not clip.
+    p.float("near_clip")?;
+    p.float("far_clip")?;
+    let medium = p.object("medium")?.map(|m| conv.medium(m)).transpose()?;
+    let resolution = match p.object("film")? {
+        Some(f) => film(f)?,
+        None => [768, 576],
+    };
+    let render = match p.object("sampler")? {
+        Some(s) => sampler(s)?,
+        None => RenderDesc { spp: 4, ..RenderDesc::default() },
+    };
+    p.finish()?;
+
+    let fov_axis = match fov_axis {
+        None | Some(("x", _)) => FovAxis::X,
+        Some(("y", _)) => FovAxis::Y,
+        Some(("smaller", _)) if resolution[0] > resolution[1] => FovAxis::Y,
+        Some(("smaller", _)) => FovAxis::X,
+        Some(("larger", _)) if resolution[0] > resolution[1] => FovAxis::X,
+        Some(("larger", _)) => FovAxis::Y,
+        Some((other, prop)) => {
+            return Err(prop.pos.err(format!(
+                "fov_axis \"{other}\" is not supported; use x, y, smaller or larger"
+            )));
+        }
+    };
+    let (origin, target, up) = match steps {
+        [TransformStep::Lookat { origin, target, up }] => (*origin, *target, *up),
+        _ => {
+            let t = compose(steps, &o.pos, "the sensor's to_world")?;
+            let m = t.m.matrix3;
+            let lengths = [m.x_axis, m.y_axis, m.z_axis].map(|c| c.length());
+            if lengths.iter().any(|l| (l - 1.0).abs() > 1e-3) {
+                return Err(p.err(
+                    "the to_world transform scales; Mitsuba rejects scale factors in a \
+                     camera's to_world too, so remove the <scale>",
+                ));
+            }
+            if m.determinant() < 0.0 {
+                return Err(p.err(
+                    "the to_world transform mirrors (a negative scale), which zerovar's look-at \
+                     camera cannot express; remove the mirroring <scale>",
+                ));
+            }
+            let origin = Vec3::from(t.m.translation);
+            (origin, origin + Vec3::from(m.z_axis), Vec3::from(m.y_axis))
+        }
+    };
+    let camera = CameraDesc { origin, target, up, fov, fov_axis, resolution, medium };
+    Ok((spanned(&o.pos, camera), render))
+}
+
+fn film(o: &Rc<Object>) -> Result<[u32; 2]> {
+    let p = Props::new(o);
+    if o.kind != "hdrfilm" {
+        return Err(p.err("zerovar has only the `hdrfilm` film"));
+    }
+    let size = |name: &'static str, default: u32| -> Result<u32> {
+        match p.integer(name)? {
+            None => Ok(default),
+            Some(v) => u32::try_from(v).map_err(|_| p.err(format!("{name} {v} must be positive"))),
+        }
+    };
+    let resolution = [size("width", 768)?, size("height", 576)?];
+    // The output file's format: zerovar always writes float RGB EXR and a PNG preview.
+    for (name, allowed) in [
+        ("pixel_format", &["rgb", "rgba"][..]),
+        ("component_format", &["float16", "float32"]),
+        ("file_format", &["openexr", "exr"]),
+    ] {
+        if let Some((v, prop)) = p.string(name)?
+            && !allowed.contains(&v)
+        {
+            return Err(prop.pos.err(format!(
+                "{name} \"{v}\" is not supported; zerovar writes a float RGB EXR ({})",
+                allowed.join(" or ")
+            )));
+        }
+    }
+    if let Some(f) = p.object("rfilter")? {
+        let fp = Props::new(f);
+        if f.kind != "box" {
+            return Err(fp.err(
+                "zerovar's camera uses a box pixel filter only; use <rfilter type=\"box\"/>",
+            ));
+        }
+        fp.finish()?;
+    }
+    p.finish()?;
+    Ok(resolution)
+}
+
+fn sampler(o: &Rc<Object>) -> Result<RenderDesc> {
+    let p = Props::new(o);
+    if o.kind != "independent" {
+        return Err(p.err("zerovar has only the `independent` sampler"));
+    }
+    let spp = p.integer("sample_count")?.unwrap_or(4);
+    let seed = p.integer("seed")?.unwrap_or(0);
+    p.finish()?;
+    Ok(RenderDesc {
+        spp: u32::try_from(spp)
+            .ok()
+            .filter(|s| *s > 0)
+            .ok_or_else(|| p.err(format!("sample_count {spp} must be at least 1")))?,
+        seed: u64::try_from(seed)
+            .map_err(|_| p.err(format!("seed {seed} must be non-negative")))?,
+        ..RenderDesc::default()
+    })
+}
+
+/// The integrator's kind (after unwrapping `moment`), max_depth and rr_depth.
+fn integrator(o: &Rc<Object>) -> Result<(&'static str, i64, u32)> {
+    let p = Props::new(o);
+    let kind = match o.kind.as_str() {
+        "moment" => {
+            let inner = p.objects("integrator");
+            p.finish()?;
+            return match inner.as_slice() {
+                [(_, i)] => integrator(i),
+                _ => Err(p.err("a moment integrator wraps exactly one <integrator>")),
+            };
+        }
+        "path" => "path",
+        "volpath" | "volpathmis" => "volpath",
+        other => {
+            return Err(
+                p.err(format!("the `{other}` integrator is not supported; use {INTEGRATORS}"))
+            );
+        }
+    };
+    let max_depth = p.integer("max_depth")?.unwrap_or(-1);
+    let rr_depth = p.integer("rr_depth")?.unwrap_or(5);
+    if p.boolean("hide_emitters")? == Some(true) {
+        return Err(p.err("hide_emitters = true is not supported; remove it"));
+    }
+    p.finish()?;
+    if !(-1..=i64::from(u32::MAX)).contains(&max_depth) {
+        return Err(p.err(format!("max_depth {max_depth} must be -1 (unlimited) or a depth >= 0")));
+    }
+    let rr_depth = u32::try_from(rr_depth)
+        .ok()
+        .filter(|d| *d > 0)
+        .ok_or_else(|| p.err(format!("rr_depth {rr_depth} must be at least 1")))?;
+    Ok((kind, max_depth, rr_depth))
+}

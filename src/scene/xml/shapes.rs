@@ -1,0 +1,267 @@
+//! Shapes with their BSDFs, textures, media and area emitters, and the other emitters, mapped
+//! onto `ShapeDesc`, `BsdfDesc` and `LightDesc`. Mitsuba's defaults apply (diffuse 0.5, unit
+//! intensities and radiances, spot cutoff 20 degrees); plugins zerovar lacks are errors that
+//! name them.
+
+use super::props::{COLOR, Props, color};
+use super::tree::{Object, Value};
+use super::{Conv, Result, compose, spanned};
+use crate::scene::desc::{
+    BsdfDesc, CheckerboardDesc, EmitterDesc, LightDesc, Rgb, ShapeDesc, TextureDesc,
+};
+use glam::{Vec3, Vec3A};
+use std::rc::Rc;
+use toml::Spanned;
+
+const SHAPES: &str = "sphere, cube, rectangle, disk or obj";
+const BSDFS: &str = "null, diffuse, dielectric, or twosided around diffuse";
+const EMITTERS: &str = "point, spot, directional, constant, envmap, and area inside a <shape>";
+
+pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
+    let p = Props::new(o);
+    match o.kind.as_str() {
+        "sphere" | "cube" | "rectangle" | "disk" | "obj" => {}
+        "ply" | "serialized" => {
+            return Err(p.err(format!(
+                "{} meshes are not supported yet; convert the mesh to OBJ and use <shape \
+                 type=\"obj\">",
+                o.kind
+            )));
+        }
+        other => return Err(p.err(format!("unknown shape `{other}`; use {SHAPES}"))),
+    }
+    let (center, radius) =
+        if o.kind == "sphere" { (p.vector("center")?, p.float("radius")?) } else { (None, None) };
+    let (mut filename, mut face_normals, mut flip_uv) = (None, None, true);
+    if o.kind == "obj" {
+        let Some((name, prop)) = p.string("filename")? else {
+            return Err(p.err("give the mesh as <string name=\"filename\" value=\"...\"/>"));
+        };
+        filename = Some(conv.file(name, prop)?);
+        face_normals = p.boolean("face_normals")?;
+        flip_uv = p.boolean("flip_tex_coords")?.unwrap_or(true);
+    }
+    let transform = p.transform("to_world")?.unwrap_or(&[]).to_vec();
+    let flip_normals = p.boolean("flip_normals")?.unwrap_or(false);
+    let bsdf = p.object("bsdf")?.map(bsdf).transpose()?;
+    let (mut interior, mut exterior) = (None, None);
+    for (prop, m) in p.objects("medium") {
+        let slot = match prop.name.as_str() {
+            "interior" => &mut interior,
+            "exterior" => &mut exterior,
+            other => {
+                return Err(prop.pos.err(format!(
+                    "a shape's medium is named \"interior\" or \"exterior\", not \"{other}\"; \
+                     add name=\"interior\" or name=\"exterior\""
+                )));
+            }
+        };
+        *slot = Some(conv.medium(m)?);
+    }
+    let emitter = match p.object("emitter")? {
+        None => None,
+        Some(e) => {
+            let ep = Props::new(e);
+            if e.kind != "area" {
+                return Err(
+                    ep.err("a shape holds only an `area` emitter; put other emitters in <scene>")
+                );
+            }
+            let radiance = ep.color("radiance")?.unwrap_or(Rgb::Grey(1.0));
+            ep.finish()?;
+            Some(EmitterDesc { radiance })
+        }
+    };
+    p.finish()?;
+    let textured =
+        bsdf.as_ref().is_some_and(|b| matches!(b.reflectance, Some(TextureDesc::Checkerboard(_))));
+    if o.kind == "obj" && flip_uv && textured {
+        return Err(p.err(
+            "zerovar reads OBJ texture coordinates unflipped while Mitsuba flips them by \
+             default; add <boolean name=\"flip_tex_coords\" value=\"false\"/> to texture this \
+             mesh",
+        ));
+    }
+    let desc = ShapeDesc {
+        kind: o.kind.clone(),
+        center,
+        radius,
+        filename,
+        face_normals,
+        transform,
+        flip_normals,
+        bsdf,
+        interior,
+        exterior,
+        emitter,
+    };
+    Ok(spanned(&o.pos, desc))
+}
+
+pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
+    let p = Props::new(o);
+    let mut d = BsdfDesc {
+        kind: o.kind.clone(),
+        reflectance: None,
+        two_sided: None,
+        int_ior: None,
+        ext_ior: None,
+    };
+    match o.kind.as_str() {
+        "null" => {}
+        "diffuse" => {
+            d.reflectance = match p.raw("reflectance") {
+                None => None,
+                Some(prop) => match &prop.value {
+                    Value::Object(t) if t.tag == "texture" => Some(texture(t)?),
+                    _ => Some(TextureDesc::Constant(
+                        color(prop)
+                            .ok_or_else(|| p.wrong(prop, &format!("{COLOR} or a <texture>")))?,
+                    )),
+                },
+            };
+        }
+        "dielectric" => {
+            for (name, slot) in [("int_ior", &mut d.int_ior), ("ext_ior", &mut d.ext_ior)] {
+                *slot = match p.raw(name) {
+                    None => None,
+                    Some(prop) => match prop.value {
+                        Value::Float(v) => Some(v as f32),
+                        Value::Integer(v) => Some(v as f32),
+                        _ => {
+                            return Err(p.wrong(
+                                prop,
+                                "a <float> (named materials such as \"bk7\" are not supported; \
+                                 give the index)",
+                            ));
+                        }
+                    },
+                };
+            }
+        }
+        "twosided" => {
+            let inner = p.objects("bsdf");
+            p.finish()?;
+            let [(_, inner)] = inner.as_slice() else {
+                return Err(p.err("twosided wraps exactly one <bsdf>"));
+            };
+            if inner.kind != "diffuse" {
+                return Err(p.err(format!(
+                    "zerovar's two-sided surfaces are diffuse only, not `{}`",
+                    inner.kind
+                )));
+            }
+            return Ok(BsdfDesc { two_sided: Some(true), ..bsdf(inner)? });
+        }
+        "thindielectric" => {
+            return Err(
+                p.err(format!("zerovar has no thin dielectric (`thindielectric`); use {BSDFS}"))
+            );
+        }
+        other => return Err(p.err(format!("unknown or unsupported bsdf `{other}`; use {BSDFS}"))),
+    }
+    p.finish()?;
+    Ok(d)
+}
+
+/// A `<texture>`: the checkerboard, scaled by a `to_uv` transform.
+pub(super) fn texture(o: &Rc<Object>) -> Result<TextureDesc> {
+    let p = Props::new(o);
+    if o.kind != "checkerboard" {
+        return Err(p.err(format!(
+            "the `{}` texture is not supported; zerovar has `checkerboard`",
+            o.kind
+        )));
+    }
+    let color0 = p.color("color0")?;
+    let color1 = p.color("color1")?;
+    let scale = match p.transform("to_uv")? {
+        None => None,
+        Some(steps) => {
+            let t = compose(steps, &o.pos, "to_uv")?;
+            let (m, offset) = (t.m.matrix3, t.m.translation);
+            if m.x_axis.y != 0.0 || m.y_axis.x != 0.0 || offset.x != 0.0 || offset.y != 0.0 {
+                return Err(p.err(
+                    "to_uv may only scale u and v (zerovar's checkerboard has a scale, no \
+                     rotation or offset)",
+                ));
+            }
+            Some([m.x_axis.x, m.y_axis.y])
+        }
+    };
+    p.finish()?;
+    Ok(TextureDesc::Checkerboard(CheckerboardDesc {
+        kind: "checkerboard".into(),
+        color0,
+        color1,
+        scale,
+    }))
+}
+
+/// An emitter outside shapes.
+pub(super) fn light(conv: &Conv, o: &Rc<Object>) -> Result<Spanned<LightDesc>> {
+    let p = Props::new(o);
+    let mut d = LightDesc {
+        kind: o.kind.clone(),
+        position: None,
+        target: None,
+        intensity: None,
+        cutoff_angle: None,
+        beam_width: None,
+        direction: None,
+        irradiance: None,
+        angular_diameter: None,
+        radiance: None,
+        filename: None,
+        scale: None,
+        transform: Vec::new(),
+    };
+    let one = Some(Rgb::Grey(1.0));
+    let to_world = |p: &Props<'_>| -> Result<Option<crate::transform::Transform>> {
+        p.transform("to_world")?.map(|s| compose(s, &o.pos, "to_world")).transpose()
+    };
+    match o.kind.as_str() {
+        "point" => {
+            d.intensity = p.color("intensity")?.or(one);
+            d.position = match (p.vector("position")?, to_world(&p)?) {
+                (Some(_), Some(_)) => return Err(p.err("give position or to_world, not both")),
+                (Some(v), None) => Some(v),
+                (None, t) => Some(t.map_or(Vec3::ZERO, |t| t.point(Vec3A::ZERO).into())),
+            };
+        }
+        "spot" => {
+            d.intensity = p.color("intensity")?.or(one);
+            d.cutoff_angle = p.float("cutoff_angle")?;
+            d.beam_width = p.float("beam_width")?;
+            let t = to_world(&p)?.unwrap_or_default();
+            let position = t.point(Vec3A::ZERO);
+            d.position = Some(position.into());
+            d.target = Some((position + t.vector(Vec3A::Z)).into());
+        }
+        "directional" => {
+            d.irradiance = p.color("irradiance")?.or(one);
+            d.direction = match (p.vector("direction")?, to_world(&p)?) {
+                (Some(_), Some(_)) => return Err(p.err("give direction or to_world, not both")),
+                (Some(v), None) => Some(v),
+                (None, t) => Some(t.unwrap_or_default().vector(Vec3A::Z).into()),
+            };
+        }
+        "constant" => d.radiance = p.color("radiance")?.or(one),
+        "envmap" => {
+            let Some((name, prop)) = p.string("filename")? else {
+                return Err(p.err("give the image as <string name=\"filename\" value=\"...\"/>"));
+            };
+            d.filename = Some(conv.file(name, prop)?);
+            d.scale = p.float("scale")?;
+            d.transform = p.transform("to_world")?.unwrap_or(&[]).to_vec();
+        }
+        "area" => {
+            return Err(p.err("an area emitter belongs inside the <shape> that emits"));
+        }
+        other => {
+            return Err(p.err(format!("unknown or unsupported emitter `{other}`; use {EMITTERS}")));
+        }
+    }
+    p.finish()?;
+    Ok(spanned(&o.pos, d))
+}

@@ -1,0 +1,622 @@
+//! Reading Mitsuba 3 XML into a tree of plugin objects with typed, named properties, before
+//! any plugin is interpreted: `<default>` values and `-D` overrides substituted for `$name` in
+//! attribute values, `<include>` files spliced in (cycles rejected), `<ref id>` resolved to
+//! the object defined earlier, transforms read into `TransformStep` lists, and every element,
+//! attribute and value checked against the format, with an error at its line and column.
+
+use crate::scene::desc::{Rgb, TransformStep};
+use crate::scene::{SceneError, Sources};
+use glam::Vec3;
+use roxmltree::Node;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+type Result<T> = std::result::Result<T, SceneError>;
+
+/// Where an element starts: file, 1-based line and column, and its offset in `Sources`.
+#[derive(Clone, Debug)]
+pub(super) struct Pos {
+    pub(super) path: Rc<Path>,
+    pub(super) line: usize,
+    pub(super) column: usize,
+    pub(super) offset: usize,
+}
+
+impl Pos {
+    /// An error at this place.
+    pub(super) fn err(&self, message: impl Into<String>) -> SceneError {
+        SceneError::Parse {
+            path: self.path.to_path_buf(),
+            line: self.line,
+            column: self.column,
+            message: message.into(),
+        }
+    }
+}
+
+/// A property's value.
+#[derive(Debug)]
+pub(super) enum Value {
+    Float(f64),
+    Integer(i64),
+    Boolean(bool),
+    String(String),
+    Rgb(Rgb),
+    /// A `<spectrum>` with one value (grey).
+    Spectrum(f32),
+    Point(Vec3),
+    Vector(Vec3),
+    Transform(Vec<TransformStep>),
+    /// A nested plugin, or one named by `<ref id>`.
+    Object(Rc<Object>),
+}
+
+impl Value {
+    /// The element that gives this kind of value, for messages.
+    pub(super) fn tag(&self) -> String {
+        match self {
+            Value::Float(_) => "<float>".into(),
+            Value::Integer(_) => "<integer>".into(),
+            Value::Boolean(_) => "<boolean>".into(),
+            Value::String(_) => "<string>".into(),
+            Value::Rgb(_) => "<rgb>".into(),
+            Value::Spectrum(_) => "<spectrum>".into(),
+            Value::Point(_) => "<point>".into(),
+            Value::Vector(_) => "<vector>".into(),
+            Value::Transform(_) => "<transform>".into(),
+            Value::Object(o) => o.describe(),
+        }
+    }
+}
+
+/// A property of an object; nested objects without a `name` have an empty one.
+#[derive(Debug)]
+pub(super) struct Prop {
+    pub(super) name: String,
+    pub(super) value: Value,
+    pub(super) pos: Pos,
+}
+
+/// A plugin instance (`<shape type="sphere">`), or the `<scene>` itself.
+#[derive(Debug)]
+pub(super) struct Object {
+    pub(super) tag: String,
+    pub(super) kind: String,
+    pub(super) id: Option<String>,
+    pub(super) pos: Pos,
+    pub(super) props: Vec<Prop>,
+}
+
+impl Object {
+    /// The opening tag, for messages: `<shape type="sphere">`.
+    pub(super) fn describe(&self) -> String {
+        if self.tag == "scene" {
+            "<scene>".into()
+        } else {
+            format!("<{} type=\"{}\">", self.tag, self.kind)
+        }
+    }
+}
+
+const OBJECT_TAGS: &[&str] = &[
+    "integrator",
+    "sensor",
+    "film",
+    "rfilter",
+    "sampler",
+    "shape",
+    "bsdf",
+    "texture",
+    "emitter",
+    "medium",
+    "phase",
+    "volume",
+];
+const PROPERTY_TAGS: &str = "float, integer, boolean, string, rgb, spectrum, point, vector, \
+                             transform, ref";
+
+/// Reads the scene file `path` (text `source`) and the files it includes into the `<scene>`
+/// object and the directories `<path>` elements added, the last first; every file read is
+/// added to `sources`.
+pub(super) fn read(
+    path: &Path,
+    source: &str,
+    defines: &[(String, String)],
+    sources: &mut Sources,
+) -> Result<(Object, Vec<PathBuf>)> {
+    let mut reader = Reader {
+        params: defines.iter().cloned().collect(),
+        ids: HashMap::new(),
+        sources,
+        stack: Vec::new(),
+        root_dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
+        search: Vec::new(),
+    };
+    let (pos, props) = reader.file(path, source, true)?;
+    let scene = Object { tag: "scene".into(), kind: "scene".into(), id: None, pos, props };
+    Ok((scene, reader.search))
+}
+
+struct Reader<'s> {
+    /// `$name` values: `-D` first, then `<default>` elements in document order.
+    params: HashMap<String, String>,
+    ids: HashMap<String, Rc<Object>>,
+    sources: &'s mut Sources,
+    /// Files being read, outermost first, to detect cyclic includes.
+    stack: Vec<PathBuf>,
+    /// The scene file's directory.
+    root_dir: PathBuf,
+    /// Directories added by `<path>`, the last first.
+    search: Vec<PathBuf>,
+}
+
+impl Reader<'_> {
+    /// Reads one file's `<scene>` and returns its position and children; `top` when they are
+    /// the scene's own (not included inside an object).
+    fn file(&mut self, path: &Path, source: &str, top: bool) -> Result<(Pos, Vec<Prop>)> {
+        let base = self.sources.push(path.to_path_buf(), source.to_string());
+        let path: Rc<Path> = Rc::from(path);
+        let doc = roxmltree::Document::parse(source).map_err(|e| {
+            let p = e.pos();
+            SceneError::Parse {
+                path: path.to_path_buf(),
+                line: p.row as usize,
+                column: p.col as usize,
+                message: format!(
+                    "malformed XML: {}",
+                    e.to_string().trim_end_matches(&format!(" at {}:{}", p.row, p.col))
+                ),
+            }
+        })?;
+        let at = |node: Node<'_, '_>| {
+            let p = doc.text_pos_at(node.range().start);
+            Pos {
+                path: path.clone(),
+                line: p.row as usize,
+                column: p.col as usize,
+                offset: base + node.range().start,
+            }
+        };
+        let root = doc.root_element();
+        let pos = at(root);
+        if root.tag_name().name() != "scene" {
+            return Err(pos.err(format!(
+                "the root element is <{}>; a Mitsuba scene file holds one \
+                 <scene version=\"3.0.0\">",
+                root.tag_name().name()
+            )));
+        }
+        self.attributes(root, &pos, &["version"])?;
+        match self.attr(root, &pos, "version")? {
+            Some(v) if v.starts_with("2.") || v.starts_with("3.") => {}
+            Some(v) => {
+                return Err(pos.err(format!(
+                    "<scene version=\"{v}\">: only Mitsuba 2 and 3 scenes (version 2.x or 3.x) \
+                     are read; upgrade older scenes with Mitsuba first"
+                )));
+            }
+            // Included files may leave the version out, as in Mitsuba.
+            None if !self.stack.is_empty() => {}
+            None => {
+                return Err(pos.err("<scene> needs a version attribute, e.g. version=\"3.0.0\""));
+            }
+        }
+        let props = self.children(root, &at, top)?;
+        Ok((pos, props))
+    }
+
+    /// The properties and objects nested in `node`.
+    fn children(
+        &mut self,
+        node: Node<'_, '_>,
+        at: &dyn Fn(Node<'_, '_>) -> Pos,
+        top: bool,
+    ) -> Result<Vec<Prop>> {
+        let mut props: Vec<Prop> = Vec::new();
+        for child in node.children() {
+            if child.is_text() {
+                if child.text().is_some_and(|t| !t.trim().is_empty()) {
+                    return Err(at(child).err(format!(
+                        "unexpected text inside <{}>; values go in value=\"...\" attributes",
+                        node.tag_name().name()
+                    )));
+                }
+                continue;
+            }
+            if !child.is_element() {
+                continue;
+            }
+            let pos = at(child);
+            let tag = child.tag_name().name();
+            let new: Vec<Prop> = match tag {
+                "default" | "path" if !top => {
+                    return Err(pos.err(format!(
+                        "<{tag}> belongs directly inside <scene>, not inside <{}>",
+                        node.tag_name().name()
+                    )));
+                }
+                "default" => {
+                    self.attributes(child, &pos, &["name", "value"])?;
+                    let name = self.required(child, &pos, "name")?;
+                    let value = self.required(child, &pos, "value")?;
+                    self.params.entry(name).or_insert(value);
+                    vec![]
+                }
+                "include" => self.include(child, &pos, top)?,
+                "path" => {
+                    self.attributes(child, &pos, &["value"])?;
+                    let value = self.required(child, &pos, "value")?;
+                    let dir = pos.path.parent().unwrap_or(Path::new("")).join(&value);
+                    if !dir.is_dir() {
+                        return Err(pos.err(format!(
+                            "<path value=\"{value}\">: {} is not a directory",
+                            dir.display()
+                        )));
+                    }
+                    self.search.insert(0, dir);
+                    vec![]
+                }
+                "ref" if top => {
+                    return Err(pos.err(
+                        "<ref> belongs inside the object that uses the referenced one, not in \
+                         <scene>",
+                    ));
+                }
+                "ref" => {
+                    self.attributes(child, &pos, &["id", "name"])?;
+                    let id = self.required(child, &pos, "id")?;
+                    let Some(object) = self.ids.get(&id) else {
+                        return Err(pos.err(format!(
+                            "<ref id=\"{id}\"> names no object defined before it; define an \
+                             object with id=\"{id}\" earlier in the file"
+                        )));
+                    };
+                    let value = Value::Object(object.clone());
+                    vec![Prop {
+                        name: self.attr(child, &pos, "name")?.unwrap_or_default(),
+                        value,
+                        pos,
+                    }]
+                }
+                t if OBJECT_TAGS.contains(&t) => {
+                    self.attributes(child, &pos, &["type", "id", "name"])?;
+                    let Some(kind) = self.attr(child, &pos, "type")? else {
+                        return Err(pos.err(format!(
+                            "<{t}> needs a type attribute naming its plugin, e.g. \
+                             <{t} type=\"...\">"
+                        )));
+                    };
+                    let id = self.attr(child, &pos, "id")?;
+                    let name = self.attr(child, &pos, "name")?.unwrap_or_default();
+                    let inner = self.children(child, at, false)?;
+                    let object = Rc::new(Object {
+                        tag: t.to_string(),
+                        kind,
+                        id: id.clone(),
+                        pos: pos.clone(),
+                        props: inner,
+                    });
+                    if let Some(id) = id {
+                        if let Some(first) = self.ids.get(&id) {
+                            return Err(pos.err(format!(
+                                "id \"{id}\" is already used by {} at line {}; ids must be unique",
+                                first.describe(),
+                                first.pos.line
+                            )));
+                        }
+                        self.ids.insert(id, object.clone());
+                    }
+                    vec![Prop { name, value: Value::Object(object), pos }]
+                }
+                "transform" => {
+                    self.attributes(child, &pos, &["name"])?;
+                    let name = self.required(child, &pos, "name")?;
+                    vec![Prop { name, value: Value::Transform(self.transform(child, at)?), pos }]
+                }
+                "float" | "integer" | "boolean" | "string" | "rgb" | "spectrum" | "point"
+                | "vector" => {
+                    let value = self.value(child, &pos)?;
+                    vec![Prop { name: self.required(child, &pos, "name")?, value, pos }]
+                }
+                other => {
+                    return Err(pos.err(format!(
+                        "unknown element <{other}>; use an object ({}), a property \
+                         ({PROPERTY_TAGS}), {}",
+                        OBJECT_TAGS.join(", "),
+                        if top { "<default>, <path> or <include>" } else { "or <include>" }
+                    )));
+                }
+            };
+            for p in new {
+                if let Some(first) = props.iter().find(|q| !p.name.is_empty() && q.name == p.name) {
+                    return Err(p.pos.err(format!(
+                        "`{}` is given twice (first at line {}); give it once",
+                        p.name, first.pos.line
+                    )));
+                }
+                props.push(p);
+            }
+        }
+        Ok(props)
+    }
+
+    fn include(&mut self, node: Node<'_, '_>, pos: &Pos, top: bool) -> Result<Vec<Prop>> {
+        self.attributes(node, pos, &["filename"])?;
+        let name = self.required(node, pos, "filename")?;
+        let dir = pos.path.parent().unwrap_or(Path::new(""));
+        let file =
+            resolve(&name, dir, &self.search, &self.root_dir).unwrap_or_else(|| dir.join(&name));
+        let text = std::fs::read_to_string(&file).map_err(|e| {
+            pos.err(format!("<include filename=\"{name}\">: cannot read {}: {e}", file.display()))
+        })?;
+        let key = file.canonicalize().unwrap_or_else(|_| file.clone());
+        if self.stack.is_empty() {
+            self.stack.push(pos.path.canonicalize().unwrap_or_else(|_| pos.path.to_path_buf()));
+        }
+        if let Some(i) = self.stack.iter().position(|f| *f == key) {
+            let chain: Vec<String> =
+                self.stack[i..].iter().map(|f| f.display().to_string()).collect();
+            return Err(pos.err(format!(
+                "cyclic include: {} includes {} again; remove one of these includes",
+                chain.join(" -> "),
+                key.display()
+            )));
+        }
+        self.stack.push(key);
+        let (_, props) = self.file(&file, &text, top)?;
+        self.stack.pop();
+        Ok(props)
+    }
+
+    /// The steps of a `<transform>`, in document order.
+    fn transform(
+        &mut self,
+        node: Node<'_, '_>,
+        at: &dyn Fn(Node<'_, '_>) -> Pos,
+    ) -> Result<Vec<TransformStep>> {
+        let mut steps = Vec::new();
+        for child in node.children() {
+            if child.is_text() && child.text().is_some_and(|t| !t.trim().is_empty()) {
+                return Err(at(child).err("unexpected text inside <transform>"));
+            }
+            if !child.is_element() {
+                continue;
+            }
+            let pos = at(child);
+            let step = match child.tag_name().name() {
+                "translate" => {
+                    self.attributes(child, &pos, &["x", "y", "z", "value"])?;
+                    TransformStep::Translate(self.xyz(child, &pos, 0.0)?)
+                }
+                "scale" => {
+                    self.attributes(child, &pos, &["x", "y", "z", "value"])?;
+                    TransformStep::Scale(Rgb::Rgb(self.xyz(child, &pos, 1.0)?.into()))
+                }
+                "rotate" => {
+                    self.attributes(child, &pos, &["x", "y", "z", "value", "angle"])?;
+                    let axis = self.xyz(child, &pos, 0.0)?;
+                    let angle = self.required(child, &pos, "angle")?;
+                    let angle = number(&angle).ok_or_else(|| {
+                        pos.err(format!("<rotate angle=\"{angle}\">: the angle must be a number"))
+                    })?;
+                    TransformStep::Rotate { axis, angle }
+                }
+                "matrix" => {
+                    self.attributes(child, &pos, &["value"])?;
+                    let v = self.required(child, &pos, "value")?;
+                    let n = numbers(&v).unwrap_or_default();
+                    // Row by row: a 4x4 matrix, or the linear part of one (3x3).
+                    let k = match n.len() {
+                        16 => 4,
+                        9 => 3,
+                        _ => {
+                            return Err(pos.err(
+                                "<matrix value=\"...\"> needs 16 numbers (a 4x4 matrix row by row) \
+                                 or 9 (3x3)",
+                            ));
+                        }
+                    };
+                    TransformStep::Matrix(std::array::from_fn(|r| {
+                        std::array::from_fn(|c| match (r < k && c < k, r == c) {
+                            (true, _) => n[k * r + c],
+                            (false, diagonal) => f32::from(u8::from(diagonal)),
+                        })
+                    }))
+                }
+                "lookat" => {
+                    self.attributes(child, &pos, &["origin", "target", "up"])?;
+                    let mut v = [Vec3::ZERO; 3];
+                    for (slot, name) in v.iter_mut().zip(["origin", "target", "up"]) {
+                        let text = match self.attr(child, &pos, name)? {
+                            Some(t) => t,
+                            None if name == "up" => continue,
+                            None => self.required(child, &pos, name)?,
+                        };
+                        *slot = vec3(&text).ok_or_else(|| {
+                            pos.err(format!("<lookat {name}=\"{text}\">: needs three numbers"))
+                        })?;
+                    }
+                    let [origin, target, mut up] = v;
+                    if up == Vec3::ZERO {
+                        // As Mitsuba: a direction perpendicular to the view.
+                        up = perpendicular((target - origin).normalize_or_zero());
+                    }
+                    TransformStep::Lookat { origin, target, up }
+                }
+                other => {
+                    return Err(pos.err(format!(
+                        "unknown element <{other}> in <transform>; use translate, rotate, scale, \
+                         matrix or lookat"
+                    )));
+                }
+            };
+            if child.children().any(|c| c.is_element()) {
+                return Err(pos.err(format!("<{}> holds no elements", child.tag_name().name())));
+            }
+            steps.push(step);
+        }
+        Ok(steps)
+    }
+
+    /// The value of a property element.
+    fn value(&mut self, node: Node<'_, '_>, pos: &Pos) -> Result<Value> {
+        let tag = node.tag_name().name();
+        if node.children().any(|c| c.is_element()) {
+            return Err(pos.err(format!("<{tag}> holds no elements")));
+        }
+        if tag == "point" || tag == "vector" {
+            self.attributes(node, pos, &["name", "value", "x", "y", "z"])?;
+            let v = self.xyz(node, pos, 0.0)?;
+            return Ok(if tag == "point" { Value::Point(v) } else { Value::Vector(v) });
+        }
+        self.attributes(node, pos, &["name", "value"])?;
+        let text = self.required(node, pos, "value")?;
+        let bad =
+            |what: &str| pos.err(format!("<{tag} value=\"{text}\">: the value must be {what}"));
+        Ok(match tag {
+            "float" => Value::Float(text.trim().parse().map_err(|_| bad("a number"))?),
+            "integer" => Value::Integer(text.trim().parse().map_err(|_| bad("an integer"))?),
+            "boolean" => match text.trim().to_ascii_lowercase().as_str() {
+                "true" => Value::Boolean(true),
+                "false" => Value::Boolean(false),
+                _ => return Err(bad("true or false")),
+            },
+            "string" => Value::String(text),
+            "rgb" => match numbers(&text).as_deref() {
+                Some([v]) => Value::Rgb(Rgb::Grey(*v)),
+                Some([r, g, b]) => Value::Rgb(Rgb::Rgb([*r, *g, *b])),
+                _ => return Err(bad("three numbers \"r, g, b\" or one grey value")),
+            },
+            _ => match numbers(&text).as_deref() {
+                Some([v]) => Value::Spectrum(*v),
+                _ => {
+                    return Err(bad(
+                        "one number (a grey spectrum); wavelength:value lists are not \
+                         supported, use <rgb>",
+                    ));
+                }
+            },
+        })
+    }
+
+    /// A vector from `value` (three numbers, or one for all three) or from `x`, `y`, `z`
+    /// attributes defaulting to `missing`.
+    fn xyz(&mut self, node: Node<'_, '_>, pos: &Pos, missing: f32) -> Result<Vec3> {
+        let tag = node.tag_name().name();
+        if let Some(text) = self.attr(node, pos, "value")? {
+            if ["x", "y", "z"].iter().any(|a| node.attribute(*a).is_some()) {
+                return Err(pos.err(format!("<{tag}>: give either value or x, y, z, not both")));
+            }
+            return match numbers(&text).as_deref() {
+                Some([v]) => Ok(Vec3::splat(*v)),
+                Some([x, y, z]) => Ok(Vec3::new(*x, *y, *z)),
+                _ => Err(pos.err(format!(
+                    "<{tag} value=\"{text}\">: the value must be three numbers (or one)"
+                ))),
+            };
+        }
+        let mut v = [missing; 3];
+        for (slot, a) in v.iter_mut().zip(["x", "y", "z"]) {
+            if let Some(text) = self.attr(node, pos, a)? {
+                *slot = number(&text).ok_or_else(|| {
+                    pos.err(format!("<{tag} {a}=\"{text}\">: the value must be a number"))
+                })?;
+            }
+        }
+        Ok(Vec3::from_array(v))
+    }
+
+    /// Rejects attributes outside `allowed`.
+    fn attributes(&self, node: Node<'_, '_>, pos: &Pos, allowed: &[&str]) -> Result<()> {
+        match node.attributes().find(|a| !allowed.contains(&a.name())) {
+            Some(a) => Err(pos.err(format!(
+                "<{}> has no attribute `{}`; it takes {}",
+                node.tag_name().name(),
+                a.name(),
+                allowed.join(", ")
+            ))),
+            None => Ok(()),
+        }
+    }
+
+    /// An attribute with `$name` references replaced.
+    fn attr(&self, node: Node<'_, '_>, pos: &Pos, name: &str) -> Result<Option<String>> {
+        let Some(text) = node.attribute(name) else { return Ok(None) };
+        let mut out = String::with_capacity(text.len());
+        let mut rest = text;
+        while let Some(i) = rest.find('$') {
+            out.push_str(&rest[..i]);
+            let after = &rest[i + 1..];
+            // As Mitsuba: the longest parameter name the text goes on with.
+            let Some((key, value)) = self
+                .params
+                .iter()
+                .filter(|(k, _)| !k.is_empty() && after.starts_with(k.as_str()))
+                .max_by_key(|(k, _)| k.len())
+            else {
+                let len = after
+                    .find(|c: char| !(c.is_ascii_alphanumeric() || c == '_'))
+                    .unwrap_or(after.len());
+                let key = &after[..len];
+                return Err(pos.err(format!(
+                    "`${key}` in {name}=\"{text}\" names no <default> (nor -D {key}=...); \
+                     add <default name=\"{key}\" value=\"...\"/> before it"
+                )));
+            };
+            out.push_str(value);
+            rest = &after[key.len()..];
+        }
+        out.push_str(rest);
+        Ok(Some(out))
+    }
+
+    fn required(&self, node: Node<'_, '_>, pos: &Pos, name: &str) -> Result<String> {
+        self.attr(node, pos, name)?.ok_or_else(|| {
+            pos.err(format!("<{}> needs a `{name}` attribute", node.tag_name().name()))
+        })
+    }
+}
+
+/// Where a file name given in directory `dir` points: relative to `dir`, or else (as Mitsuba
+/// resolves names) to a `<path>` directory or the scene file's directory.
+pub(super) fn resolve(
+    name: &str,
+    dir: &Path,
+    search: &[PathBuf],
+    root_dir: &Path,
+) -> Option<PathBuf> {
+    std::iter::once(dir)
+        .chain(search.iter().map(PathBuf::as_path))
+        .chain(std::iter::once(root_dir))
+        .map(|d| d.join(name))
+        .find(|f| f.is_file())
+}
+
+fn number(text: &str) -> Option<f32> {
+    text.trim().parse().ok()
+}
+
+/// Numbers separated by commas and/or white space.
+fn numbers(text: &str) -> Option<Vec<f32>> {
+    text.split(|c: char| c == ',' || c.is_whitespace())
+        .filter(|t| !t.is_empty())
+        .map(|t| t.parse().ok())
+        .collect()
+}
+
+/// The first tangent of the orthonormal basis Mitsuba builds around a unit vector (Duff et
+/// al. 2017, "Building an Orthonormal Basis, Revisited").
+fn perpendicular(n: Vec3) -> Vec3 {
+    let sign = if n.z >= 0.0 { 1.0 } else { -1.0 };
+    let a = -1.0 / (sign + n.z);
+    let b = n.x * n.y * a;
+    Vec3::new(1.0 + sign * n.x * n.x * a, sign * b, -sign * n.x)
+}
+
+fn vec3(text: &str) -> Option<Vec3> {
+    match numbers(text)?.as_slice() {
+        [x, y, z] => Some(Vec3::new(*x, *y, *z)),
+        _ => None,
+    }
+}

@@ -1,0 +1,576 @@
+//! Mitsuba 3 XML scenes: each example renders exactly as its TOML twin, transforms follow
+//! Mitsuba's order, `<default>`, `-D`, `<include>` and `<ref>` work, and bad input is an error
+//! at the right line and column that says what to do.
+
+use crate::common::{repo, temp_dir, write};
+use glam::{Vec2, Vec3A};
+use std::process::Command;
+use zerovar::render::{Budget, RenderOptions, render};
+use zerovar::scene::{Scene, SceneError, load_str};
+
+fn defines(d: &[(&str, &str)]) -> Vec<(String, String)> {
+    d.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect()
+}
+
+/// A repository scene with its text edited (to shrink the image), loaded as if in place.
+fn edited(path: &str, edits: &[(&str, &str)], d: &[(&str, &str)]) -> Scene {
+    let path = repo(path);
+    let mut text = std::fs::read_to_string(&path).unwrap();
+    for (from, to) in edits {
+        assert!(text.contains(from), "{from} not in {}", path.display());
+        text = text.replace(from, to);
+    }
+    load_str(&path, &text, &defines(d)).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn image(scene: &Scene, seed: u64) -> Vec<[f32; 3]> {
+    render(scene, &RenderOptions::unguided(Budget::Samples(2), seed), &|_, _| true).unwrap().image
+}
+
+/// An XML scene from text, written to the temporary directory as `name`.
+fn xml(name: &str, text: &str, d: &[(&str, &str)]) -> Result<Scene, SceneError> {
+    let path = write(name, text);
+    zerovar::scene::load(&path, &defines(d))
+}
+
+const SMALL_XML: [(&str, &str); 2] = [
+    ("name=\"width\" value=\"320\"", "name=\"width\" value=\"40\""),
+    ("name=\"height\" value=\"240\"", "name=\"height\" value=\"30\""),
+];
+
+#[test]
+fn fog_sphere_xml_renders_exactly_as_the_toml() {
+    let toml = [("resolution = [320, 240]", "resolution = [40, 30]")];
+    let a = edited("scenes/fog-sphere.toml", &toml, &[]);
+    let b = edited("scenes/xml/fog-sphere.xml", &SMALL_XML, &[]);
+    assert_eq!(b.settings.spp, 256);
+    assert!(image(&a, 5) == image(&b, 5), "fog sphere: XML and TOML images differ");
+    // -D overrides a <default> as it overrides a [defaults] entry.
+    let a = edited("scenes/fog-sphere.toml", &toml, &[("density", "4"), ("spp", "3")]);
+    let b = edited("scenes/xml/fog-sphere.xml", &SMALL_XML, &[("density", "4"), ("spp", "3")]);
+    assert_eq!(b.settings.spp, 3);
+    assert_eq!(b.media[0].majorant().to_array(), [4.0; 3]);
+    assert!(image(&a, 6) == image(&b, 6), "fog sphere with -D: XML and TOML images differ");
+}
+
+#[test]
+fn cloud_xml_renders_exactly_as_the_toml_with_a_delta_sun() {
+    let toml =
+        [("resolution = [320, 200]", "resolution = [40, 25]"), ("angular_diameter = 0.53", "")];
+    let a = edited("scenes/cloud.toml", &toml, &[]);
+    // The camera comes from an included file; shrink it through a copy of the scene that
+    // includes an edited camera.
+    let camera = std::fs::read_to_string(repo("scenes/xml/cloud-camera.xml")).unwrap();
+    let camera =
+        camera.replace("value=\"320\"", "value=\"40\"").replace("value=\"200\"", "value=\"25\"");
+    let dir = temp_dir().join("cloud");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join("cloud-camera.xml"), camera).unwrap();
+    let scene = std::fs::read_to_string(repo("scenes/xml/cloud.xml")).unwrap();
+    let vol = repo("scenes/data/cloud.vol");
+    let scene = scene.replace("../data/cloud.vol", vol.to_str().unwrap());
+    let b = load_str(&dir.join("cloud.xml"), &scene, &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(b.settings.max_depth, Some(64));
+    assert!(image(&a, 7) == image(&b, 7), "cloud: XML and TOML images differ");
+}
+
+const CAMERA: &str = r#"
+    <sensor type="perspective">
+        <float name="fov" value="50"/>
+        <string name="fov_axis" value="larger"/>
+        <transform name="to_world">TO_WORLD</transform>
+        <film type="hdrfilm">
+            <integer name="width" value="30"/>
+            <integer name="height" value="40"/>
+        </film>
+    </sensor>"#;
+
+fn with_camera(to_world: &str, body: &str) -> String {
+    format!(
+        "<scene version=\"3.0.0\">{}\n<integrator type=\"volpath\"/>\n{body}\n</scene>\n",
+        CAMERA.replace("TO_WORLD", to_world)
+    )
+}
+
+#[test]
+fn transforms_follow_mitsuba_order() {
+    // Translate, then rotate by 90 degrees about z, then scale by 2: the sphere centred at
+    // (1, 0, 0) with radius 0.5 lands centred at (0, 2, 0) with radius 1.
+    let shape = r#"<shape type="sphere">
+        <point name="center" value="1, 0, 0"/>
+        <float name="radius" value="0.5"/>
+        <transform name="to_world">
+            <rotate z="1" angle="90"/>
+            <scale value="2"/>
+        </transform>
+    </shape>"#;
+    let lookat = r#"<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#;
+    let s = xml("order.xml", &with_camera(lookat, shape), &[]).unwrap();
+    let b = s.bounds();
+    assert!((b.min - Vec3A::new(-1.0, 1.0, -1.0)).abs().max_element() < 1e-5, "{b:?}");
+    assert!((b.max - Vec3A::new(1.0, 3.0, 1.0)).abs().max_element() < 1e-5, "{b:?}");
+
+    // The same camera as a rotate/translate chain and as a matrix; a rectangle placed by
+    // scale, rotate, translate as in the TOML format.
+    let chain = r#"<rotate y="1" angle="180"/><translate z="5"/>"#;
+    let matrix = r#"<matrix value="-1 0 0 0  0 1 0 0  0 0 -1 5  0 0 0 1"/>"#;
+    let rect = r#"<shape type="rectangle"><transform name="to_world">
+        <scale x="2" y="1" z="1"/><rotate x="1" angle="-90"/><translate value="0, -1, 0"/>
+    </transform></shape>"#;
+    let toml = r#"
+[camera]
+origin = [0, 0, 5]
+target = [0, 0, 0]
+fov = 50
+fov_axis = "y"
+resolution = [30, 40]
+
+[[shapes]]
+type = "rectangle"
+transform = [{ scale = [2, 1, 1] }, { rotate = { axis = [1, 0, 0], angle = -90 } }, { translate = [0, -1, 0] }]
+"#;
+    let t = crate::common::scene(toml);
+    for to_world in [lookat, chain, matrix] {
+        let s = xml("camera.xml", &with_camera(to_world, rect), &[]).unwrap();
+        for film in [Vec2::new(0.0, 0.0), Vec2::new(15.0, 20.0), Vec2::new(30.0, 7.0)] {
+            let (a, b) = (t.camera.ray(film), s.camera.ray(film));
+            assert!((a.origin - b.origin).abs().max_element() < 1e-5, "{to_world}");
+            assert!((a.direction - b.direction).abs().max_element() < 1e-5, "{to_world}");
+        }
+        assert_eq!(s.bounds().min, t.bounds().min);
+        assert_eq!(s.bounds().max, t.bounds().max);
+    }
+}
+
+#[test]
+fn lights_match_the_toml_format() {
+    let body = r#"
+    <shape type="rectangle">
+        <transform name="to_world"><rotate x="1" angle="-90"/><scale value="3"/></transform>
+        <bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.5, 0.3"/></bsdf></bsdf>
+    </shape>
+    <shape type="disk">
+        <transform name="to_world"><rotate x="1" angle="90"/><translate y="2"/></transform>
+        <emitter type="area"><rgb name="radiance" value="2"/></emitter>
+    </shape>
+    <emitter type="spot">
+        <transform name="to_world"><lookat origin="1, 3, 0" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <float name="intensity" value="20"/>
+        <float name="cutoff_angle" value="30"/>
+    </emitter>
+    <emitter type="directional">
+        <transform name="to_world"><lookat origin="0, 0, 0" target="-1, -2, -1" up="0, 1, 0"/></transform>
+        <spectrum name="irradiance" value="0.5"/>
+    </emitter>
+    <emitter type="envmap">
+        <string name="filename" value="sky.exr"/>
+        <float name="scale" value="2"/>
+        <transform name="to_world"><rotate y="1" angle="90"/></transform>
+    </emitter>"#;
+    let toml = r#"
+[camera]
+origin = [0, 3, 6]
+target = [0, 0, 0]
+fov = 40
+resolution = [24, 18]
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 3 }]
+bsdf = { type = "diffuse", reflectance = [0.7, 0.5, 0.3], two_sided = true }
+
+[[shapes]]
+type = "disk"
+transform = [{ rotate = { axis = [1, 0, 0], angle = 90 } }, { translate = [0, 2, 0] }]
+emitter = { radiance = 2 }
+
+[[lights]]
+type = "spot"
+position = [1, 3, 0]
+target = [0, 0, 0]
+intensity = 20
+cutoff_angle = 30
+
+[[lights]]
+type = "directional"
+direction = [-1, -2, -1]
+irradiance = 0.5
+
+[[lights]]
+type = "envmap"
+filename = "sky.exr"
+scale = 2
+transform = [{ rotate = { axis = [0, 1, 0], angle = 90 } }]
+"#;
+    let camera = r#"<sensor type="perspective"><float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0, 3, 6" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="18"/></film>
+    </sensor>"#;
+    let sky: Vec<[f32; 3]> =
+        (0..32).map(|i| [0.1 * (i % 8) as f32, 0.05 * (i / 8) as f32, 0.3]).collect();
+    let meta =
+        zerovar::output::ImageMetadata { spp: 1, seconds: 0.0, seed: 0, scene: String::new() };
+    zerovar::output::write_exr(&temp_dir().join("sky.exr"), 8, 4, &sky, &meta).unwrap();
+    let text = format!("<scene version=\"3.0.0\">{camera}{body}</scene>");
+    let a = crate::common::scene(toml);
+    let b = xml("lights.xml", &text, &[]).unwrap();
+    let (ia, ib) = (image(&a, 1), image(&b, 1));
+    for (p, q) in ia.iter().zip(&ib) {
+        for c in 0..3 {
+            assert!((p[c] - q[c]).abs() <= 1e-4 * (1.0 + p[c].abs()), "{p:?} vs {q:?}");
+        }
+    }
+}
+
+const REFS: &str = r#"<scene version="3.0.0">
+    <default name="r" value="0.5"/>
+    <medium type="homogeneous" id="haze">
+        <rgb name="sigma_a" value="0.1, 0.2, 0.3"/>
+        <rgb name="sigma_s" value="0.3"/>
+    </medium>
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+        <transform name="to_world"><lookat origin="0, 0, 6" target="0, 0, 0" up="0, 1, 0"/></transform>
+        <ref id="haze"/>
+    </sensor>
+    <integrator type="moment"><integrator type="volpathmis"><integer name="max_depth" value="8"/></integrator></integrator>
+    <bsdf type="dielectric" id="glass"><float name="int_ior" value="1.33"/></bsdf>
+    <shape type="sphere">
+        <float name="radius" value="$r"/>
+        <ref id="glass"/>
+        <ref name="exterior" id="haze"/>
+    </shape>
+    <shape type="sphere">
+        <point name="center" x="2"/>
+        <ref id="glass"/>
+        <ref name="exterior" id="haze"/>
+    </shape>
+</scene>
+"#;
+
+#[test]
+fn defaults_overrides_and_refs() {
+    let s = xml("refs.xml", REFS, &[]).unwrap();
+    assert_eq!(s.media.len(), 1, "a medium referenced three times is one medium");
+    assert_eq!(s.camera_medium, Some(0));
+    assert!(s.surfaces.iter().all(|f| f.exterior == Some(0) && f.interior.is_none()));
+    assert_eq!(s.settings.max_depth, Some(8));
+    assert_eq!(s.camera.resolution, [768, 576], "Mitsuba's default film");
+    assert_eq!(s.settings.spp, 4, "Mitsuba's default sampler");
+    assert!((s.bounds().min.x + 0.5).abs() < 1e-6);
+    let sigma = s.media[0].majorant().to_array();
+    assert!((sigma[0] - 0.4).abs() < 1e-6 && (sigma[2] - 0.6).abs() < 1e-6, "{sigma:?}");
+    // -D overrides a default; an undeclared key is allowed, as in Mitsuba.
+    let s = xml("refs.xml", REFS, &[("r", "2"), ("unused", "1")]).unwrap();
+    assert!((s.bounds().min.x + 2.0).abs() < 1e-6);
+    // -D may also define what no <default> declares.
+    let text = REFS.replace("<default name=\"r\" value=\"0.5\"/>", "");
+    assert!(xml("refs.xml", &text, &[("r", "1")]).is_ok());
+}
+
+#[test]
+fn includes_and_cyclic_includes() {
+    let dir = temp_dir().join("include");
+    std::fs::create_dir_all(dir.join("parts")).unwrap();
+    let camera =
+        r#"<scene><sensor type="perspective"><float name="fov" value="30"/></sensor></scene>"#;
+    std::fs::write(dir.join("parts/camera.xml"), camera).unwrap();
+    // A file name in an included file: relative to it, or else to the scene file (Mitsuba).
+    std::fs::write(dir.join("near.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(dir.join("parts/far.obj"), "v 0 0 0\nv 2 0 0\nv 0 2 0\nf 1 2 3\n").unwrap();
+    let shapes = r#"<scene version="3.0.0">
+        <shape type="obj"><string name="filename" value="near.obj"/></shape>
+        <shape type="obj"><string name="filename" value="far.obj"/></shape>
+    </scene>"#;
+    std::fs::write(dir.join("parts/shapes.xml"), shapes).unwrap();
+    let main = "<scene version=\"3.0.0\">\n  <include filename=\"parts/camera.xml\"/>\n  \
+                <include filename=\"parts/shapes.xml\"/>\n</scene>\n";
+    std::fs::write(dir.join("main.xml"), main).unwrap();
+    let s = zerovar::scene::load(&dir.join("main.xml"), &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s.shapes.len(), 2);
+    assert_eq!(s.bounds().max.x, 2.0);
+
+    let a = "<scene version=\"3.0.0\">\n  <include filename=\"b.xml\"/>\n</scene>\n";
+    let b = "<scene version=\"3.0.0\">\n\n  <include filename=\"a.xml\"/>\n</scene>\n";
+    std::fs::write(dir.join("a.xml"), a).unwrap();
+    std::fs::write(dir.join("b.xml"), b).unwrap();
+    let e = zerovar::scene::load(&dir.join("a.xml"), &[]).unwrap_err().to_string();
+    assert!(e.contains("b.xml:3:3: cyclic include"), "{e}");
+    assert!(e.contains("remove one of these includes"), "{e}");
+}
+
+const GOOD: &str = r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+    </sensor>
+    <shape type="sphere">
+        <float name="radius" value="1"/>
+    </shape>
+</scene>
+"#;
+
+/// Each edit of `GOOD` fails at `place` (`file:line:column`) with a message holding `needles`.
+#[test]
+fn bad_input_names_the_place_and_the_fix() {
+    assert!(xml("good.xml", GOOD, &[]).is_ok());
+    let radius = "<float name=\"radius\" value=\"1\"/>";
+    let cases: &[(&str, &str, &str, &str, &[&str])] = &[
+        ("tag", radius, "<sphere/>", "tag.xml:6:9", &["unknown element <sphere>", "shape"]),
+        (
+            "plugin",
+            "type=\"sphere\"",
+            "type=\"teapot\"",
+            "plugin.xml:5:5",
+            &["unknown shape `teapot`", "sphere, cube, rectangle, disk or obj"],
+        ),
+        (
+            "type",
+            radius,
+            "<rgb name=\"radius\" value=\"1, 2, 3\"/>",
+            "type.xml:6:9",
+            &["<shape type=\"sphere\">", "`radius` must be a <float>, not <rgb>"],
+        ),
+        (
+            "property",
+            radius,
+            "<float name=\"radus\" value=\"1\"/>",
+            "property.xml:6:9",
+            &["no property `radus`", "it takes center, radius"],
+        ),
+        (
+            "missing",
+            "\"sphere\">\n        <float name=\"radius\" value=\"1\"/>",
+            "\"obj\">\n        <string name=\"filename\" value=\"nowhere.obj\"/>",
+            "missing.xml:6:9",
+            &["`filename`", "nowhere.obj not found"],
+        ),
+        (
+            "malformed",
+            "</shape>",
+            "</shap>",
+            "malformed.xml:7:5",
+            &["malformed XML: expected 'shape' tag, not 'shap'"],
+        ),
+        ("number", "value=\"40\"", "value=\"forty\"", "number.xml:3:9", &["must be a number"]),
+        (
+            "default",
+            "value=\"40\"",
+            "value=\"$fov\"",
+            "default.xml:3:9",
+            &["`$fov`", "<default name=\"fov\""],
+        ),
+        (
+            "ref",
+            radius,
+            "<ref id=\"glass\"/>",
+            "ref.xml:6:9",
+            &["<ref id=\"glass\"> names no object defined before it"],
+        ),
+        (
+            "thin",
+            radius,
+            "<bsdf type=\"thindielectric\"/>",
+            "thin.xml:6:9",
+            &["no thin dielectric (`thindielectric`)"],
+        ),
+        (
+            "include",
+            "<shape type=\"sphere\">",
+            "<include filename=\"nothere.xml\"/><shape type=\"sphere\">",
+            "include.xml:5:5",
+            &["<include filename=\"nothere.xml\">: cannot read", "nothere.xml"],
+        ),
+        ("ply", "type=\"sphere\"", "type=\"ply\"", "ply.xml:5:5", &["not supported yet", "OBJ"]),
+        (
+            "pathint",
+            radius,
+            "<bsdf type=\"null\"/>",
+            "pathint.xml:1:1",
+            &["`path` integrator", "volpath"],
+        ),
+        (
+            "depth",
+            "<shape type=\"sphere\">",
+            "<integrator type=\"path\"><integer name=\"max_depth\" value=\"-2\"/></integrator>\n<shape type=\"sphere\">",
+            "depth.xml:5:5",
+            &["<integrator type=\"path\">: max_depth -2 must be -1 (unlimited) or a depth >= 0"],
+        ),
+        (
+            "version",
+            "version=\"3.0.0\"",
+            "version=\"0.6.0\"",
+            "version.xml:1:1",
+            &["version 2.x or 3.x"],
+        ),
+        (
+            "area",
+            "<shape type=\"sphere\">",
+            "<emitter type=\"area\"/><shape type=\"sphere\">",
+            "area.xml:5:5",
+            &["inside the <shape>"],
+        ),
+    ];
+    let sky = "<emitter type=\"constant\"/>";
+    let e = xml("sky.xml", &GOOD.replace("</scene>", &format!("{sky}\n{sky}\n</scene>")), &[]);
+    let e = e.unwrap_err().to_string();
+    assert!(e.contains("sky.xml:9:1: <emitter type=\"constant\">: a second environment"), "{e}");
+    for (name, from, to, place, needles) in cases {
+        assert!(GOOD.contains(from), "{name}");
+        let file = format!("{name}.xml");
+        let e = xml(&file, &GOOD.replacen(from, to, 1), &[]).unwrap_err().to_string();
+        let place = temp_dir().join(place);
+        assert!(e.starts_with(&format!("{}:", place.display())), "{name}: {e}");
+        for n in *needles {
+            assert!(e.contains(n), "{name}: `{n}` missing from: {e}");
+        }
+    }
+}
+
+#[test]
+fn cli_checks_and_renders_xml_and_fails_cleanly() {
+    let run =
+        |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_zerovar")).args(args).output().unwrap();
+    let scene = repo("scenes/xml/fog-sphere.xml");
+    let o = run(&["check", scene.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("fog          homogeneous"));
+    let out = temp_dir().join("fog-xml.exr");
+    let o = run(&[
+        "render",
+        repo("scenes/xml/cloud.xml").to_str().unwrap(),
+        "--spp",
+        "1",
+        "-D",
+        "density=2",
+        "-o",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success() && out.is_file(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let bad = write("bad-cli.xml", GOOD.replace("<float name=\"radius\"", "<float nam=\"radius\""));
+    for cmd in ["check", "render"] {
+        let o = run(&[cmd, bad.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(!err.contains("panicked") && err.contains("bad-cli.xml:6:9"), "{err}");
+        assert!(err.contains("<float> has no attribute `nam`"), "{err}");
+    }
+}
+
+#[test]
+fn volumes_and_meshes_match_the_toml_format() {
+    write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
+    let mut albedo = Vec::new();
+    zerovar::media::VolGrid { resolution: [2, 1, 1], channels: 1, data: vec![0.5, 0.9] }
+        .write(&mut albedo)
+        .unwrap();
+    write("albedo.vol", albedo);
+    let box_ = r#"<transform name="to_world"><translate value="-0.5, -0.5, -0.5"/><scale value="2"/></transform>"#;
+    let text = with_camera(
+        r#"<lookat origin="0, 1, 5" target="0, 0, 0" up="0, 1, 0"/>"#,
+        &format!(
+            r#"<medium type="heterogeneous" id="m">
+                <volume type="constvolume" name="sigma_t"><rgb name="value" value="2, 3, 4"/>{box_}</volume>
+                <volume type="gridvolume" name="albedo"><string name="filename" value="albedo.vol"/>{box_}</volume>
+                <float name="scale" value="0.5"/>
+                <phase type="hg"/>
+            </medium>
+            <shape type="cube"><bsdf type="null"/><ref name="interior" id="m"/></shape>
+            <shape type="obj">
+                <string name="filename" value="tri.obj"/>
+                <transform name="to_world"><translate y="-2"/></transform>
+            </shape>
+            <emitter type="constant"/>"#
+        ),
+    );
+    let toml = r#"
+[camera]
+origin = [0, 1, 5]
+target = [0, 0, 0]
+fov = 50
+fov_axis = "y"
+resolution = [30, 40]
+
+[media.m]
+type = "grid"
+density = 1
+sigma_t = [2, 3, 4]
+albedo = "albedo.vol"
+scale = 0.5
+phase = { type = "hg", g = 0.8 }
+transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }]
+
+[[shapes]]
+type = "cube"
+bsdf = { type = "null" }
+interior = "m"
+
+[[shapes]]
+type = "obj"
+filename = "tri.obj"
+transform = [{ translate = [0, -2, 0] }]
+
+[[lights]]
+type = "constant"
+radiance = 1
+"#;
+    let a = crate::common::scene(toml);
+    let b = xml("volumes.xml", &text, &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(image(&a, 2) == image(&b, 2), "volumes: XML and TOML images differ");
+
+    // An albedo grid in another box than the extinction's is an error.
+    let other = text.replacen("<scale value=\"2\"/>", "<scale value=\"3\"/>", 1);
+    let e = xml("volumes.xml", &other, &[]).unwrap_err().to_string();
+    assert!(e.contains("the albedo grid must fill the same box as sigma_t"), "{e}");
+}
+
+#[test]
+fn mitsuba_syntax_details() {
+    let dir = temp_dir().join("syntax");
+    std::fs::create_dir_all(dir.join("meshes")).unwrap();
+    std::fs::write(dir.join("meshes/m.obj"), "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    std::fs::write(dir.join("null.xml"), r#"<scene version="3.0.0"><bsdf type="null"/></scene>"#)
+        .unwrap();
+    // `$ab` takes the longest name it goes on with; one value stands for x, y and z; a lookat
+    // without up picks Mitsuba's perpendicular; a 3x3 matrix is the linear part; <path> adds a
+    // directory; an include may sit inside an object.
+    let text = r#"<scene version="3.0.0">
+        <default name="a" value="0.25"/>
+        <default name="ab" value="0.5"/>
+        <path value="meshes"/>
+        <integrator type="volpath"/>
+        <sensor type="perspective">
+            <float name="fov" value="30"/>
+            <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0"/></transform>
+        </sensor>
+        <shape type="sphere">
+            <point name="center" value="$a"/>
+            <float name="radius" value="$ab"/>
+            <include filename="null.xml"/>
+        </shape>
+        <shape type="obj">
+            <string name="filename" value="m.obj"/>
+            <transform name="to_world">
+                <matrix value="0 -1 0  1 0 0  0 0 1"/>
+                <translate value="0, 0, -3"/>
+            </transform>
+        </shape>
+    </scene>"#;
+    let path = dir.join("syntax.xml");
+    std::fs::write(&path, text).unwrap();
+    let s = zerovar::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(matches!(s.surfaces[0].bsdf, zerovar::bsdf::Bsdf::Null));
+    let b = s.bounds();
+    // The sphere spans [-0.25, 0.75] on every axis, the rotated triangle x in [-1, 0].
+    assert!((b.min - Vec3A::new(-1.0, -0.25, -3.0)).abs().max_element() < 1e-6, "{b:?}");
+    assert!((b.max - Vec3A::new(0.75, 1.0, 0.75)).abs().max_element() < 1e-6, "{b:?}");
+    let t = crate::common::scene(
+        "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nup = [1, 0, 0]\nfov = 30\n\
+         resolution = [768, 576]\n",
+    );
+    for film in [Vec2::new(0.0, 0.0), Vec2::new(700.0, 100.0)] {
+        let (a, b) = (t.camera.ray(film), s.camera.ray(film));
+        assert!((a.direction - b.direction).abs().max_element() < 1e-6);
+    }
+}
