@@ -1,6 +1,7 @@
-//! The hot kernels of a guided walk, each timed alone: Henyey-Greenstein sampling, a shadow
-//! ray's transmittance through the cloud, guided distance sampling along a ray of the light
-//! shaft with a trained field, and one whole camera path, unguided and fully guided.
+//! The hot kernels of a guided walk: Henyey-Greenstein sampling, a shadow ray's transmittance
+//! through the cloud, guided distance sampling along a camera ray of the fog room with a
+//! trained field (the ray's intersection included), and one whole camera path, unguided and
+//! fully guided.
 //! `cargo bench --bench kernels`. (Free flights per tracker: `--bench tracking`; vMF products
 //! and field lookups: `cargo bench -p zerovar-guiding`.)
 
@@ -76,7 +77,7 @@ fn transmittance(c: &mut Criterion) {
 fn guided_distance(c: &mut Criterion) {
     let scene = load("scenes/fog-room.toml");
     let field = trained(&scene);
-    let medium = &scene.media[0];
+    let medium = &scene.media[scene.camera_medium.expect("the camera is in the fog") as usize];
     let mut cache = FieldCache::new(&field);
     let mut s = Sampler::new(3, 0, 0);
     let mut counters = Counters::default();
@@ -116,6 +117,7 @@ fn full_path(c: &mut Criterion) {
         let unguided = VolPath::from_scene(&scene).settings();
         let guided = WalkSettings { guide: Components::FULL, alpha: 0.5, ..unguided };
         let mut counters = Counters::default();
+        // Each strategy traces the same sequence of camera samples.
         let mut first = 0;
         group.bench_function(format!("{name}-unguided-x{BATCH}"), |b| {
             b.iter(|| {
@@ -124,6 +126,7 @@ fn full_path(c: &mut Criterion) {
             })
         });
         let mut cache = FieldCache::new(&field);
+        let mut first = 0;
         group.bench_function(format!("{name}-guided-full-x{BATCH}"), |b| {
             b.iter(|| {
                 first += BATCH;

@@ -2,7 +2,8 @@
 //! PNG and SVG.
 //!
 //! The plots are drawn with plotters and the DejaVu Sans font compiled into the binary, so
-//! they look the same on a machine without system fonts (CI, a render node).
+//! the PNG looks the same on a machine without system fonts (CI, a render node); the SVG
+//! names `sans-serif` and leaves the glyphs to its viewer.
 
 use crate::compare::MethodResult;
 use plotters::coord::Shift;

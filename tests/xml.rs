@@ -574,3 +574,35 @@ fn mitsuba_syntax_details() {
         assert!((a.direction - b.direction).abs().max_element() < 1e-6);
     }
 }
+
+#[test]
+fn hostile_nesting_includes_and_repeats_are_errors_not_crashes() {
+    // Deep nesting would overflow the reader's stack; it stops at 64 levels.
+    let depth = 100_000;
+    let deep = format!(
+        "<scene version=\"3.0.0\">\n{}{}</scene>\n",
+        "<bsdf type=\"twosided\">".repeat(depth),
+        "</bsdf>".repeat(depth)
+    );
+    let e = xml("deep.xml", &deep, &[]).unwrap_err().to_string();
+    assert!(e.contains("nested more than 64 deep"), "{e}");
+
+    // A file including another twice, which includes the next twice, and so on: 2^20 reads
+    // without a limit on includes.
+    let dir = temp_dir().join("bomb");
+    std::fs::create_dir_all(&dir).unwrap();
+    for level in 0..20 {
+        let next = format!("<include filename=\"l{}.xml\"/>\n", level + 1);
+        let text = format!("<scene version=\"3.0.0\">\n{next}{next}</scene>\n");
+        std::fs::write(dir.join(format!("l{level}.xml")), text).unwrap();
+    }
+    std::fs::write(dir.join("l20.xml"), "<scene version=\"3.0.0\">\n</scene>\n").unwrap();
+    let e = zerovar::scene::load(&dir.join("l0.xml"), &[]).unwrap_err().to_string();
+    assert!(e.contains("more than 1024 <include> elements"), "{e}");
+
+    // A default given twice in the file is an error; -D still overrides the one given once.
+    let twice = "<scene version=\"3.0.0\">\n  <default name=\"spp\" value=\"4\"/>\n  \
+                 <default name=\"spp\" value=\"8\"/>\n</scene>\n";
+    let e = xml("twice.xml", twice, &[]).unwrap_err().to_string();
+    assert!(e.contains("twice.xml:3:3") && e.contains("given twice"), "{e}");
+}

@@ -120,7 +120,8 @@ pub fn parse_guiding(text: &str) -> Option<(Components, bool)> {
         return Some((Components::FULL, true));
     }
     let components = Components::parse(&rest.join("+"))?;
-    Some((components, adaptive && components.any()))
+    // `off+auto` asks for nothing to be guided adaptively: a contradiction, not a mode.
+    (components.any() || !adaptive).then_some((components, adaptive))
 }
 
 /// Validated settings of one render.
@@ -167,7 +168,7 @@ pub struct RenderResult {
     pub image: Vec<[f32; 3]>,
     /// Samples per pixel of the render phase.
     pub spp: u32,
-    /// Seconds of the render phase.
+    /// Seconds of the render phase (with adaptive guiding, its pilot included).
     pub seconds: f64,
     /// Event counters of the render phase.
     pub counters: Counters,
@@ -454,7 +455,7 @@ fn final_phase(
     match options.budget {
         Budget::Samples(spp) => {
             // Doubling passes, so a cancelled render still returns whole passes.
-            let total = spp as u64 * w as u64 * h as u64;
+            let total = (spp as u64 * w as u64 * h as u64).max(1);
             let finished = AtomicU64::new(0);
             while done < spp {
                 let batch = done.max(1).min(spp - done);
@@ -471,7 +472,7 @@ fn final_phase(
             }
         }
         Budget::Time(limit) => {
-            let total = limit.as_millis() as u64;
+            let total = (limit.as_millis() as u64).max(1);
             let mut batch = 1u32;
             loop {
                 let pass_start = Instant::now();

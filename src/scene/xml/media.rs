@@ -26,7 +26,7 @@ impl Conv {
         if let Some(name) = self.medium_names.get(&Rc::as_ptr(o)) {
             return Ok(name.clone());
         }
-        let name = match &o.id {
+        let mut name = match &o.id {
             Some(id) => id.clone(),
             None => format!(
                 "{}:{}:{}",
@@ -35,6 +35,15 @@ impl Conv {
                 o.pos.column
             ),
         };
+        // Two files of the same name in different directories, or an id that looks like a
+        // place, must not make two media share a name (the second would replace the first).
+        let base = name.clone();
+        for n in 2.. {
+            if !self.media.contains_key(&name) {
+                break;
+            }
+            name = format!("{base}#{n}");
+        }
         let desc = self.medium_desc(o)?;
         self.media.insert(name.clone(), spanned(&o.pos, desc));
         self.medium_names.insert(Rc::as_ptr(o), name.clone());

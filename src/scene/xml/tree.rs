@@ -8,7 +8,7 @@ use crate::scene::desc::{Rgb, TransformStep};
 use crate::scene::{SceneError, Sources};
 use glam::Vec3;
 use roxmltree::Node;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
@@ -127,6 +127,9 @@ pub(super) fn read(
 ) -> Result<(Object, Vec<PathBuf>)> {
     let mut reader = Reader {
         params: defines.iter().cloned().collect(),
+        declared: HashSet::new(),
+        nesting: 0,
+        includes: 0,
         ids: HashMap::new(),
         sources,
         stack: Vec::new(),
@@ -138,9 +141,21 @@ pub(super) fn read(
     Ok((scene, reader.search))
 }
 
+/// Deepest nesting of elements read: far beyond any real scene, and shallow enough that a
+/// hostile file cannot overflow the stack of the recursive reader.
+const MAX_NESTING: usize = 64;
+/// Most `<include>` elements read in all: a file including another twice, which includes a
+/// third twice, and so on, would otherwise be read an exponential number of times.
+const MAX_INCLUDES: usize = 1024;
+
 struct Reader<'s> {
     /// `$name` values: `-D` first, then `<default>` elements in document order.
     params: HashMap<String, String>,
+    /// Names given by `<default>` elements, so one given twice is an error.
+    declared: HashSet<String>,
+    /// Elements open around the one being read, and includes read so far.
+    nesting: usize,
+    includes: usize,
     ids: HashMap<String, Rc<Object>>,
     sources: &'s mut Sources,
     /// Files being read, outermost first, to detect cyclic includes.
@@ -240,6 +255,12 @@ impl Reader<'_> {
                     self.attributes(child, &pos, &["name", "value"])?;
                     let name = self.required(child, &pos, "name")?;
                     let value = self.required(child, &pos, "value")?;
+                    if !self.declared.insert(name.clone()) {
+                        return Err(pos.err(format!(
+                            "<default name=\"{name}\"> is given twice; give each default once"
+                        )));
+                    }
+                    // A -D value was put there first and wins.
                     self.params.entry(name).or_insert(value);
                     vec![]
                 }
@@ -289,7 +310,15 @@ impl Reader<'_> {
                     };
                     let id = self.attr(child, &pos, "id")?;
                     let name = self.attr(child, &pos, "name")?.unwrap_or_default();
-                    let inner = self.children(child, at, false)?;
+                    if self.nesting >= MAX_NESTING {
+                        return Err(pos.err(format!(
+                            "objects nested more than {MAX_NESTING} deep; no scene needs that"
+                        )));
+                    }
+                    self.nesting += 1;
+                    let inner = self.children(child, at, false);
+                    self.nesting -= 1;
+                    let inner = inner?;
                     let object = Rc::new(Object {
                         tag: t.to_string(),
                         kind,
@@ -344,6 +373,12 @@ impl Reader<'_> {
     fn include(&mut self, node: Node<'_, '_>, pos: &Pos, top: bool) -> Result<Vec<Prop>> {
         self.attributes(node, pos, &["filename"])?;
         let name = self.required(node, pos, "filename")?;
+        self.includes += 1;
+        if self.includes > MAX_INCLUDES {
+            return Err(pos.err(format!(
+                "more than {MAX_INCLUDES} <include> elements in all; include each file once"
+            )));
+        }
         let dir = pos.path.parent().unwrap_or(Path::new(""));
         let file =
             resolve(&name, dir, &self.search, &self.root_dir).unwrap_or_else(|| dir.join(&name));
@@ -361,6 +396,11 @@ impl Reader<'_> {
                 "cyclic include: {} includes {} again; remove one of these includes",
                 chain.join(" -> "),
                 key.display()
+            )));
+        }
+        if self.stack.len() > MAX_NESTING {
+            return Err(pos.err(format!(
+                "includes nested more than {MAX_NESTING} deep; no scene needs that"
             )));
         }
         self.stack.push(key);
