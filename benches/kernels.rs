@@ -1,8 +1,7 @@
-//! The hot kernels of a guided walk: Henyey-Greenstein sampling, a shadow ray's transmittance
-//! through the cloud, guided distance sampling along a camera ray of the fog room with a
-//! trained field (the ray's intersection included), and one whole camera path, unguided and
-//! fully guided.
-//! `cargo bench --bench kernels`. (Free flights per tracker: `--bench tracking`; vMF products
+//! The hot kernels of a guided walk: Henyey-Greenstein sampling, one free flight through the
+//! cloud per tracker, a shadow ray's transmittance through the cloud, guided distance sampling
+//! along a camera ray of the fog room with a trained field (the ray's intersection included),
+//! and one whole camera path, unguided and fully guided. `cargo bench --bench kernels`. (Whole paths per tracker: `--bench tracking`; vMF products
 //! and field lookups: `cargo bench -p zerovar-guiding`.)
 
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -20,6 +19,7 @@ use zerovar::render::{Budget, RenderOptions, TrainBudget, train};
 use zerovar::rng::Sampler;
 use zerovar::scene::Scene;
 use zerovar::stats::Counters;
+use zerovar::tracking::{Tracker, sample_flight};
 use zerovar_guiding::Field;
 
 const BATCH: u64 = 256;
@@ -72,6 +72,44 @@ fn transmittance(c: &mut Criterion) {
             black_box(shadow_transmittance(&scene, ray, to.length(), medium, &mut s, &mut counters))
         })
     });
+}
+
+fn free_flight(c: &mut Criterion) {
+    let scene = load("scenes/cloud.toml");
+    let medium = &scene.media[0];
+    let mut group = c.benchmark_group("free-flight-cloud");
+    let trackers = [
+        Tracker::Delta,
+        Tracker::WeightedDelta,
+        Tracker::Decomposition,
+        Tracker::WeightedDecomposition,
+        Tracker::Spectral,
+        Tracker::SpectralDecomposition,
+        Tracker::RayMarching,
+    ];
+    for tracker in trackers {
+        let mut s = Sampler::new(5, 0, 0);
+        let mut counters = Counters::default();
+        // From the cloud's centre in random directions, to the box around it.
+        let centre = Vec3A::new(0.0, 1.2, 0.0);
+        group.bench_function(tracker.name(), |b| {
+            b.iter(|| {
+                let dir = zerovar::math::uniform_sphere(s.next_2d());
+                let ray = Ray::new(centre, dir);
+                let t_max = scene.intersect(&ray, f32::INFINITY).map_or(10.0, |h| h.t);
+                black_box(sample_flight(
+                    medium,
+                    tracker,
+                    &ray,
+                    t_max,
+                    Vec3A::ONE,
+                    &mut s,
+                    &mut counters,
+                ))
+            })
+        });
+    }
+    group.finish();
 }
 
 fn guided_distance(c: &mut Criterion) {
@@ -143,6 +181,6 @@ criterion_group! {
         .sample_size(20)
         .warm_up_time(Duration::from_millis(500))
         .measurement_time(Duration::from_secs(2));
-    targets = phase, transmittance, guided_distance, full_path
+    targets = phase, free_flight, transmittance, guided_distance, full_path
 }
 criterion_main!(benches);
