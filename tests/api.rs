@@ -133,3 +133,64 @@ fn cancelling_from_the_callback_returns_whole_passes() {
     let err = render(&s, &guided, &|_, _| false).unwrap_err();
     assert!(matches!(err, zerovar::render::RenderError::Cancelled), "{err}");
 }
+
+/// The fog sphere of `scenes/fog-sphere.toml`, assembled in code at `resolution`.
+fn fog_sphere_in_code(resolution: [u32; 2]) -> zerovar::scene::SceneBuilder {
+    use zerovar::scene::SceneBuilder;
+    use zerovar::scene::desc::{
+        BsdfDesc, CameraDesc, CheckerboardDesc, LightDesc, MediumDesc, PhaseDesc, Rgb, ShapeDesc,
+        TextureDesc, TransformStep,
+    };
+    let camera =
+        CameraDesc::look_at(Vec3::new(0.0, 2.2, 6.5), Vec3::new(0.0, 0.9, 0.0), 40.0, resolution);
+    let fog = MediumDesc {
+        phase: Some(PhaseDesc::hg(0.3)),
+        ..MediumDesc::homogeneous(Rgb::Grey(1.5), Rgb::Grey(0.9))
+    };
+    let floor = BsdfDesc {
+        reflectance: Some(TextureDesc::Checkerboard(CheckerboardDesc {
+            kind: "checkerboard".into(),
+            color0: Some(Rgb::Grey(0.6)),
+            color1: Some(Rgb::Grey(0.3)),
+            scale: Some([5.0, 5.0]),
+        })),
+        ..BsdfDesc::diffuse(Rgb::Grey(0.5))
+    };
+    let floor_place = vec![
+        TransformStep::Rotate { axis: Vec3::X, angle: -90.0 },
+        TransformStep::Scale(Rgb::Grey(5.0)),
+    ];
+    SceneBuilder::new(camera)
+        .medium("fog", fog)
+        .shape(ShapeDesc {
+            interior: Some("fog".into()),
+            ..ShapeDesc::sphere(Vec3::new(0.0, 1.0, 0.0), 1.0, BsdfDesc::null())
+        })
+        .shape(ShapeDesc::placed("rectangle", floor_place, floor))
+        .light(LightDesc::point(Vec3::new(1.5, 3.2, 1.5), Rgb::Rgb([30.0, 27.0, 24.0])))
+        .light(LightDesc::constant(Rgb::Grey(0.05)))
+}
+
+#[test]
+fn a_scene_built_in_code_renders_exactly_as_its_file() {
+    let built = fog_sphere_in_code([40, 30]).build().unwrap_or_else(|e| panic!("{e}"));
+    let path = crate::common::repo("scenes/fog-sphere.toml");
+    let text = std::fs::read_to_string(&path).unwrap().replace("[320, 240]", "[40, 30]");
+    let loaded = zerovar::scene::load_str(&path, &text, &[]).unwrap();
+    let options = RenderOptions::unguided(Budget::Samples(2), 3);
+    let a = render(&built, &options, &|_, _| true).unwrap();
+    let b = render(&loaded, &options, &|_, _| true).unwrap();
+    assert_eq!(a.film.pixels, b.film.pixels);
+    assert!(a.image.iter().any(|p| p[0] > 0.0), "the image is not black");
+
+    // Invalid elements are the same errors as in a file, naming the element.
+    use zerovar::scene::desc::{BsdfDesc, ShapeDesc};
+    let bad = fog_sphere_in_code([40, 30])
+        .shape(ShapeDesc::sphere(Vec3::ZERO, -1.0, BsdfDesc::null()))
+        .build()
+        .unwrap_err()
+        .to_string();
+    assert!(bad.contains("<scene built in code>") && bad.contains("shapes[2]"), "{bad}");
+    let unknown = fog_sphere_in_code([40, 30]).global_medium("smoke").build().unwrap_err();
+    assert!(unknown.to_string().contains("smoke"), "{unknown}");
+}

@@ -56,7 +56,7 @@ pub struct SceneDesc {
 }
 
 /// `[render]`: how the image is sampled.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct RenderDesc {
     /// Samples per pixel when the command line gives no budget.
@@ -76,7 +76,7 @@ impl Default for RenderDesc {
 }
 
 /// `[camera]`: a perspective pinhole camera.
-#[derive(Debug, Deserialize)]
+#[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraDesc {
     /// Eye position.
@@ -131,7 +131,7 @@ pub enum TransformStep {
 }
 
 /// `bsdf = { type = ... }`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BsdfDesc {
     /// "null", "diffuse" or "dielectric".
@@ -181,7 +181,7 @@ pub struct EmitterDesc {
 }
 
 /// `[[shapes]]`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShapeDesc {
     /// "sphere", "cube", "rectangle", "disk" or "obj".
@@ -212,7 +212,7 @@ pub struct ShapeDesc {
 }
 
 /// `[media.NAME]`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct MediumDesc {
     /// "homogeneous", "grid" or "noise".
@@ -258,7 +258,7 @@ pub enum AlbedoDesc {
 }
 
 /// `phase = { type = ... }`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PhaseDesc {
     /// "isotropic" or "hg".
@@ -269,7 +269,7 @@ pub struct PhaseDesc {
 }
 
 /// `[[lights]]`.
-#[derive(Clone, Debug, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LightDesc {
     /// "point", "spot", "directional", "constant" or "envmap".

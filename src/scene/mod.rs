@@ -6,6 +6,7 @@
 //! change; nothing is silently clamped.
 
 mod build;
+mod builder;
 pub mod desc;
 mod load;
 mod xml;
@@ -21,6 +22,8 @@ use crate::tracking::Tracker;
 use glam::Vec3A;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
+
+pub use builder::SceneBuilder;
 
 /// Why a scene could not be loaded.
 #[derive(Debug, Error)]

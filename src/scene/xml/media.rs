@@ -52,17 +52,7 @@ impl Conv {
 
     fn medium_desc(&self, o: &Rc<Object>) -> Result<MediumDesc> {
         let p = Props::new(o);
-        let mut d = MediumDesc {
-            kind: String::new(),
-            sigma_t: None,
-            albedo: None,
-            scale: None,
-            density: None,
-            noise: None,
-            transform: Vec::new(),
-            phase: None,
-            emission: None,
-        };
+        let mut d = MediumDesc::default();
         match o.kind.as_str() {
             "homogeneous" => {
                 d.kind = "homogeneous".into();

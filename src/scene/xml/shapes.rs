@@ -100,13 +100,7 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
 
 pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
     let p = Props::new(o);
-    let mut d = BsdfDesc {
-        kind: o.kind.clone(),
-        reflectance: None,
-        two_sided: None,
-        int_ior: None,
-        ext_ior: None,
-    };
+    let mut d = BsdfDesc { kind: o.kind.clone(), ..Default::default() };
     match o.kind.as_str() {
         "null" => {}
         "diffuse" => {
@@ -201,21 +195,7 @@ pub(super) fn texture(o: &Rc<Object>) -> Result<TextureDesc> {
 /// An emitter outside shapes.
 pub(super) fn light(conv: &Conv, o: &Rc<Object>) -> Result<Spanned<LightDesc>> {
     let p = Props::new(o);
-    let mut d = LightDesc {
-        kind: o.kind.clone(),
-        position: None,
-        target: None,
-        intensity: None,
-        cutoff_angle: None,
-        beam_width: None,
-        direction: None,
-        irradiance: None,
-        angular_diameter: None,
-        radiance: None,
-        filename: None,
-        scale: None,
-        transform: Vec::new(),
-    };
+    let mut d = LightDesc { kind: o.kind.clone(), ..Default::default() };
     let one = Some(Rgb::Grey(1.0));
     let to_world = |p: &Props<'_>| -> Result<Option<crate::transform::Transform>> {
         p.transform("to_world")?.map(|s| compose(s, &o.pos, "to_world")).transpose()
