@@ -199,4 +199,22 @@ mod tests {
         let err = VolGrid::parse(Path::new("a.vol"), b"VOL").unwrap_err().to_string();
         assert!(err.contains("header"), "{err}");
     }
+
+    #[test]
+    fn hostile_resolutions_are_refused_before_any_voxel_is_allocated() {
+        // A header claiming 10^12 voxels over 12 voxels of data, and one whose byte count
+        // does not fit in memory addresses at all: errors from the header alone.
+        let mut b = bytes(&grid());
+        for (i, d) in [10_000i32, 10_000, 10_000, 1].into_iter().enumerate() {
+            b[8 + 4 * i..12 + 4 * i].copy_from_slice(&d.to_le_bytes());
+        }
+        let err = VolGrid::parse(Path::new("a.vol"), &b).unwrap_err();
+        assert!(
+            matches!(err, VolError::Truncated { expected: 4_000_000_000_000, found: 48, .. }),
+            "{err}"
+        );
+        b[8..24].copy_from_slice(&[i32::MAX.to_le_bytes(); 4].concat());
+        let err = VolGrid::parse(Path::new("a.vol"), &b).unwrap_err().to_string();
+        assert!(err.contains("too large to address"), "{err}");
+    }
 }
