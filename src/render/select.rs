@@ -157,7 +157,7 @@ pub(super) fn pilot(
 }
 
 /// One tile's pilot: relative variance and modelled cost of the pilot's samples, each way.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct TileMeasure {
     guided_variance: f64,
     unguided_variance: f64,
@@ -177,12 +177,7 @@ fn smoothed(tiles: &[TileMeasure], columns: usize) -> Vec<TileMeasure> {
     (0..tiles.len())
         .map(|i| {
             let (x, y) = (i % columns, i / columns);
-            let mut sum = TileMeasure {
-                guided_variance: 0.0,
-                unguided_variance: 0.0,
-                guided_cost: 0.0,
-                unguided_cost: 0.0,
-            };
+            let mut sum = TileMeasure::default();
             for ny in y.saturating_sub(POOL_RADIUS)..(y + POOL_RADIUS + 1).min(rows) {
                 for nx in x.saturating_sub(POOL_RADIUS)..(x + POOL_RADIUS + 1).min(columns) {
                     if let Some(m) = tiles.get(ny * columns + nx) {
