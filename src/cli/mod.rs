@@ -399,8 +399,6 @@ fn run_train(a: TrainArgs) -> Result<()> {
     }
     let defines = parse_defines(&a.scene.define)?;
     let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
-    let file = std::fs::File::create(&a.output)
-        .with_context(|| format!("{}: cannot create the field file", a.output.display()))?;
     let seed = a.seed.unwrap_or(scene.settings.seed);
     let options = RenderOptions { budget: Budget::Samples(1), seed, threads: a.threads, guiding };
     let bar = progress_bar(!a.quiet && std::io::stderr().is_terminal());
@@ -410,6 +408,9 @@ fn run_train(a: TrainArgs) -> Result<()> {
         true
     })?;
     bar.finish_and_clear();
+    // Created only now, so a failed or cancelled training leaves no empty file behind.
+    let file = std::fs::File::create(&a.output)
+        .with_context(|| format!("{}: cannot create the field file", a.output.display()))?;
     field
         .save(std::io::BufWriter::new(file))
         .with_context(|| format!("{}: cannot write the field", a.output.display()))?;
