@@ -10,7 +10,7 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Duration;
 use zerovar::guided::distance::GuidedDistance;
-use zerovar::guided::{Components, FieldCache, NoCache, RadianceCache};
+use zerovar::guided::{Components, FieldCache, NoCache, RadianceCache, TrainedField};
 use zerovar::integrators::walk::{WalkContext, WalkSettings, radiance};
 use zerovar::integrators::{VolPath, shadow_transmittance};
 use zerovar::math::Ray;
@@ -20,7 +20,6 @@ use zerovar::rng::Sampler;
 use zerovar::scene::Scene;
 use zerovar::stats::Counters;
 use zerovar::tracking::{Tracker, sample_flight};
-use zerovar_guiding::Field;
 
 const BATCH: u64 = 256;
 
@@ -30,7 +29,7 @@ fn load(path: &str) -> Scene {
 }
 
 /// A field trained on `scene` by four passes (1 + 2 + 4 + 8 spp), as `zerovar render` would.
-fn trained(scene: &Scene) -> Field {
+fn trained(scene: &Scene) -> TrainedField {
     let mut options = RenderOptions::unguided(Budget::Samples(1), 0);
     options.guiding.components = Components::FULL;
     options.guiding.train = TrainBudget::Passes(4);
@@ -116,7 +115,7 @@ fn guided_distance(c: &mut Criterion) {
     let scene = load("scenes/fog-room.toml");
     let field = trained(&scene);
     let medium = &scene.media[scene.camera_medium.expect("the camera is in the fog") as usize];
-    let mut cache = FieldCache::new(&field);
+    let mut cache = FieldCache::with_direct(&field.field, field.direct.as_ref(), false);
     let mut s = Sampler::new(3, 0, 0);
     let mut counters = Counters::default();
     c.bench_function("guided-distance/fog-room-camera-ray", |b| {
@@ -163,7 +162,7 @@ fn full_path(c: &mut Criterion) {
                 black_box(paths(&scene, &unguided, &mut NoCache, first, &mut counters))
             })
         });
-        let mut cache = FieldCache::new(&field);
+        let mut cache = FieldCache::with_direct(&field.field, field.direct.as_ref(), false);
         let mut first = 0;
         group.bench_function(format!("{name}-guided-full-x{BATCH}"), |b| {
             b.iter(|| {

@@ -4,9 +4,8 @@
 //! `cargo run --release --example trained_field`
 
 use std::path::Path;
-use zerovar::guided::Components;
+use zerovar::guided::{Components, TrainedField};
 use zerovar::render::{Budget, RenderOptions, TrainBudget, render_with_field, train};
-use zerovar_guiding::Field;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let scene = zerovar::scene::load(Path::new("scenes/fog-sphere.toml"), &[])?;
@@ -14,7 +13,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     options.guiding.components = Components::FULL;
     options.guiding.train = TrainBudget::Passes(3);
 
-    let (field, report) = train(&scene, &options, &|_, _| true)?;
+    let (trained, report) = train(&scene, &options, &|_, _| true)?;
     println!(
         "trained {} passes ({} spp) in {:.2} s: {} regions, {} lobes, {} KiB",
         report.passes,
@@ -25,11 +24,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         report.field.memory_bytes / 1024
     );
     let path = std::env::temp_dir().join("zerovar-example.zvg");
-    field.save(std::io::BufWriter::new(std::fs::File::create(&path)?))?;
+    trained.save(std::io::BufWriter::new(std::fs::File::create(&path)?))?;
 
     // Later, perhaps in another process: load the field and render with it.
-    let field = Field::load(std::io::BufReader::new(std::fs::File::open(&path)?))?;
-    let result = render_with_field(&scene, &options, &field, &|_, _| true)?;
+    let trained = TrainedField::load(std::io::BufReader::new(std::fs::File::open(&path)?))?;
+    let result = render_with_field(&scene, &options, &trained, &|_, _| true)?;
     println!(
         "rendered {} spp in {:.2} s, mean pixel {:?}",
         result.spp,

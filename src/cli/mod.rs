@@ -7,13 +7,13 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 use zerovar::guided::Components;
+use zerovar::guided::TrainedField;
 use zerovar::output::{ImageMetadata, write_exr, write_png};
 use zerovar::render::parse_guiding;
 use zerovar::render::{
     Budget, GuidingOptions, RenderOptions, TrainBudget, render, render_with_field,
 };
 use zerovar::stats::{RenderStats, TrainingStats};
-use zerovar_guiding::Field;
 
 #[derive(Parser)]
 #[command(
@@ -519,9 +519,9 @@ fn run_render(c: RenderCommand) -> Result<()> {
         Some(path) => {
             let file = std::fs::File::open(path)
                 .with_context(|| format!("{}: cannot open the field", path.display()))?;
-            let field = Field::load(std::io::BufReader::new(file))
+            let trained = TrainedField::load(std::io::BufReader::new(file))
                 .with_context(|| format!("{}: cannot load the field", path.display()))?;
-            render_with_field(&scene, &options, &field, &report)?
+            render_with_field(&scene, &options, &trained, &report)?
         }
         None => render(&scene, &options, &report)?,
     };

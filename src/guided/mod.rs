@@ -10,7 +10,10 @@
 //! robust where the cache is poor.
 
 pub mod distance;
+mod saved;
 pub mod window;
+
+pub use saved::{TRAINED_MAGIC, TRAINED_VERSION, TrainedField};
 
 use glam::{Vec2, Vec3A};
 use serde::Serialize;

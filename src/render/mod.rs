@@ -7,7 +7,7 @@
 //! only, never on the thread count or the tile schedule.
 
 use crate::film::{Film, PixelSum};
-use crate::guided::{Components, DirectFluence, FieldCache, NoCache, RadianceCache};
+use crate::guided::{Components, DirectFluence, FieldCache, NoCache, RadianceCache, TrainedField};
 use crate::integrators::VolPath;
 use crate::integrators::walk::{self, WalkContext, WalkSettings};
 use crate::math::{Spectrum, is_finite, luminance};
@@ -229,12 +229,17 @@ pub fn render(
 pub fn render_with_field(
     scene: &Scene,
     options: &RenderOptions,
-    field: &Field,
+    trained: &TrainedField,
     progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
-        let guidance = Guidance { field, direct: None, estimate: None, guided_tiles: None };
+        let guidance = Guidance {
+            field: &trained.field,
+            direct: trained.direct.as_ref(),
+            estimate: None,
+            guided_tiles: None,
+        };
         Ok(guided_phase(scene, options, guidance, Vec::new(), threads, progress, None))
     })
 }
@@ -244,10 +249,11 @@ pub fn train(
     scene: &Scene,
     options: &RenderOptions,
     progress: &Progress<'_>,
-) -> Result<(Field, TrainingReport), RenderError> {
+) -> Result<(TrainedField, TrainingReport), RenderError> {
     in_pool(options, |_| {
         let progress = &Monitor::new(progress);
-        train_in_pool(scene, options, progress).map(|(f, _, _, r)| (f, r))
+        let (field, direct, _, report) = train_in_pool(scene, options, progress)?;
+        Ok((TrainedField { field, direct: Some(direct) }, report))
     })
 }
 

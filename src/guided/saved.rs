@@ -1,0 +1,141 @@
+//! Fields saved by `zerovar train` and read by `zerovar render --field`: the guiding field
+//! with the renderer's per-region direct-fluence table, which roulette and distance guiding
+//! add to the field's fluence (see [`DirectFluence`]).
+//!
+//! The file is `ZVTRAIN\0`, a format version (u32), the field's length (u64) and the field in
+//! the guiding crate's own format, then the table: a count (u32) and that many f32 values, all
+//! little-endian. A bare guiding-crate field (another tool's, or an older `zerovar train`'s)
+//! is read too, without a table.
+
+use super::DirectFluence;
+use std::io::{Read, Write};
+use zerovar_guiding::{Field, GuidingError};
+
+/// The first bytes of a trained-field file.
+pub const TRAINED_MAGIC: [u8; 8] = *b"ZVTRAIN\0";
+/// Version of the trained-field layout.
+pub const TRAINED_VERSION: u32 = 1;
+
+/// A trained guiding field and what the renderer learned beside it.
+#[derive(Clone, Debug)]
+pub struct TrainedField {
+    /// The guiding field.
+    pub field: Field,
+    /// Per region, the fluence next-event estimation collects; `None` for a bare field.
+    pub direct: Option<DirectFluence>,
+}
+
+impl TrainedField {
+    /// Writes the field and its table.
+    pub fn save(&self, mut w: impl Write) -> Result<(), GuidingError> {
+        let mut field = Vec::new();
+        self.field.save(&mut field)?;
+        let values = self.direct.as_ref().map_or(&[][..], |d| &d.values[..]);
+        w.write_all(&TRAINED_MAGIC)?;
+        w.write_all(&TRAINED_VERSION.to_le_bytes())?;
+        w.write_all(&(field.len() as u64).to_le_bytes())?;
+        w.write_all(&field)?;
+        w.write_all(&(values.len() as u32).to_le_bytes())?;
+        for v in values {
+            w.write_all(&v.to_le_bytes())?;
+        }
+        w.flush()?;
+        Ok(())
+    }
+
+    /// Reads what [`save`](Self::save) wrote, or a bare guiding-crate field.
+    pub fn load(mut r: impl Read) -> Result<Self, GuidingError> {
+        let mut magic = [0u8; 8];
+        r.read_exact(&mut magic).map_err(|_| GuidingError::BadMagic)?;
+        if magic == zerovar_guiding::MAGIC {
+            let field = Field::load(std::io::Cursor::new(magic).chain(r))?;
+            return Ok(Self { field, direct: None });
+        }
+        if magic != TRAINED_MAGIC {
+            return Err(GuidingError::BadMagic);
+        }
+        let found = u32::from_le_bytes(read_array(&mut r)?);
+        if found != TRAINED_VERSION {
+            return Err(GuidingError::Version { found, expected: TRAINED_VERSION });
+        }
+        let length = u64::from_le_bytes(read_array(&mut r)?);
+        let field = Field::load((&mut r).take(length))?;
+        let count = u32::from_le_bytes(read_array(&mut r)?) as usize;
+        if count != 0 && count != field.regions().len() {
+            return Err(GuidingError::Decode(format!(
+                "the direct-fluence table has {count} entries for {} regions",
+                field.regions().len()
+            )));
+        }
+        // The count is checked against the field first, so a corrupt one allocates nothing.
+        let mut values = Vec::with_capacity(count);
+        for _ in 0..count {
+            let v = f32::from_le_bytes(read_array(&mut r)?);
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(GuidingError::Decode(format!("direct fluence {v} is not a fluence")));
+            }
+            values.push(v);
+        }
+        let direct = (count > 0).then_some(DirectFluence { values });
+        Ok(Self { field, direct })
+    }
+}
+
+fn read_array<const N: usize>(r: &mut impl Read) -> Result<[u8; N], GuidingError> {
+    let mut b = [0u8; N];
+    r.read_exact(&mut b).map_err(|e| GuidingError::Decode(format!("truncated: {e}")))?;
+    Ok(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Vec3A;
+    use zerovar_guiding::{FieldConfig, Sample};
+
+    fn trained() -> TrainedField {
+        let mut field = Field::new(FieldConfig::default()).unwrap();
+        let samples: Vec<Sample> = (0..2000)
+            .map(|i| {
+                let t = i as f32 * 0.01;
+                Sample {
+                    position: glam::Vec3::new(t.sin(), t.cos(), t * 0.1),
+                    direction: glam::Vec3::Z,
+                    radiance: 1.0,
+                    pdf: 1.0,
+                    distance: f32::INFINITY,
+                    volume: true,
+                }
+            })
+            .collect();
+        field.update(&samples).unwrap();
+        let records: Vec<(Vec3A, f32)> =
+            (0..100).map(|i| (Vec3A::splat(i as f32 * 0.01), 2.0)).collect();
+        let direct = DirectFluence::build(&field, &records);
+        TrainedField { field, direct: Some(direct) }
+    }
+
+    #[test]
+    fn round_trip_and_bare_fields() {
+        let t = trained();
+        let mut bytes = Vec::new();
+        t.save(&mut bytes).unwrap();
+        let back = TrainedField::load(&bytes[..]).unwrap();
+        assert_eq!(back.direct.as_ref().unwrap().values, t.direct.as_ref().unwrap().values);
+        assert_eq!(back.field.regions().len(), t.field.regions().len());
+        // A bare guiding field loads without a table.
+        let mut bare = Vec::new();
+        t.field.save(&mut bare).unwrap();
+        let back = TrainedField::load(&bare[..]).unwrap();
+        assert!(back.direct.is_none());
+        // Truncated, corrupt and foreign data are errors, never panics.
+        for cut in [4, 12, 20, bytes.len() - 2] {
+            assert!(TrainedField::load(&bytes[..cut]).is_err(), "cut at {cut}");
+        }
+        let mut bad = bytes.clone();
+        let n = bad.len();
+        bad[n - 4..].copy_from_slice(&f32::NAN.to_le_bytes());
+        assert!(TrainedField::load(&bad[..]).unwrap_err().to_string().contains("fluence"));
+        assert!(matches!(TrainedField::load(&b"not a field"[..]), Err(GuidingError::BadMagic)));
+    }
+}
