@@ -13,12 +13,15 @@ use std::sync::OnceLock;
 
 /// Why a plot could not be written.
 #[derive(Debug, thiserror::Error)]
-#[error("{path}: cannot draw the plot: {message}")]
-pub struct PlotError {
-    /// The file being written.
-    pub path: PathBuf,
-    /// What went wrong.
-    pub message: String,
+pub enum PlotError {
+    /// The plotting backend failed (the file could not be written, or the font not loaded).
+    #[error("{path}: cannot draw the plot: {message}")]
+    Draw {
+        /// The file being written.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
 }
 
 const SIZE: (u32, u32) = (800, 560);
@@ -32,7 +35,7 @@ pub fn convergence(results: &[MethodResult], title: &str, path: &Path) -> Result
     let loaded = *FONT_LOADED.get_or_init(|| {
         plotters::style::register_font(FONT, FontStyle::Normal, dejavu::sans::regular()).is_ok()
     });
-    let fail = |message: String| PlotError { path: path.to_path_buf(), message };
+    let fail = |message: String| PlotError::Draw { path: path.to_path_buf(), message };
     if !loaded {
         return Err(fail("the built-in font does not load".into()));
     }

@@ -49,6 +49,7 @@ pub struct WalkSettings {
 }
 
 /// What the walk needs to know about the pixel and the training it feeds.
+#[derive(Debug)]
 pub struct WalkContext<'a, C> {
     /// The radiance cache.
     pub cache: &'a mut C,
