@@ -211,13 +211,7 @@ fn mitsuba_d_medium_in_glass_spot() {
     validate("d-glass-spot", 1024);
 }
 
-/// Ignored: zerovar is 0.5% brighter than Mitsuba over the image (pooled difference +7.4
-/// standard errors; |z| > 3 in 0.39% of pixel-channels, mean z +7.5/sqrt(N)). The excess comes
-/// from light reflected by the emitting rectangle's own (default, diffuse 0.5) surface: with
-/// `max_depth` 2 or 3, or with a black BSDF on the light, the two agree to 0.04%. Which
-/// renderer is right there is not settled yet.
 #[test]
-#[ignore = "zerovar 0.5% brighter: light reflected off the emitter's own surface (see comment)"]
 fn mitsuba_e_area_light_checkerboard_medium_cube() {
     validate("e-area-checker-cube", 1024);
 }
