@@ -10,6 +10,9 @@
 //! quadrant the difference of the summed pixel values over its standard error (allowed 4.5). Each
 //! scene also checks that the same statistics reject our image scaled by 1.05, so a test that
 //! passes is one that could have failed.
+//!
+//! With `ZEROVAR_MITSUBA_DEBUG` set, each test prints both images (green, every other pixel)
+//! and the pixel-channels with the largest |z|.
 
 use crate::common::repo;
 use std::path::Path;
@@ -219,4 +222,9 @@ fn mitsuba_e_area_light_checkerboard_medium_cube() {
 #[test]
 fn mitsuba_f_camera_in_fog_disk() {
     validate("f-camera-in-fog", 4096);
+}
+
+#[test]
+fn mitsuba_g_envmap_sphere() {
+    validate("g-envmap-sphere", 1024);
 }
