@@ -5,6 +5,7 @@ mod cli;
 mod common;
 mod furnace;
 mod guided;
+mod mitsuba;
 mod render;
 mod single_scatter;
 mod tracking;

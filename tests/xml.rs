@@ -183,6 +183,8 @@ bsdf = { type = "diffuse", reflectance = [0.7, 0.5, 0.3], two_sided = true }
 type = "disk"
 transform = [{ rotate = { axis = [1, 0, 0], angle = 90 } }, { translate = [0, 2, 0] }]
 emitter = { radiance = 2 }
+# Mitsuba's emitting shape without a <bsdf> reflects nothing.
+bsdf = { type = "diffuse", reflectance = 0 }
 
 [[lights]]
 type = "spot"
@@ -605,4 +607,30 @@ fn hostile_nesting_includes_and_repeats_are_errors_not_crashes() {
                  <default name=\"spp\" value=\"8\"/>\n</scene>\n";
     let e = xml("twice.xml", twice, &[]).unwrap_err().to_string();
     assert!(e.contains("twice.xml:3:3") && e.contains("given twice"), "{e}");
+}
+
+/// As in Mitsuba, an emitting shape without a `<bsdf>` reflects nothing (a black diffuse
+/// BSDF) while any other shape gets the diffuse 0.5 default; an explicit BSDF on an emitter is
+/// kept. Found by the Mitsuba comparison (tests/mitsuba.rs, scene e), where light reflected off
+/// the area light's own surface made zerovar 0.5% brighter.
+#[test]
+fn emitting_shape_without_bsdf_is_black_as_in_mitsuba() {
+    use zerovar::bsdf::{Bsdf, Texture};
+    use zerovar::math::Spectrum;
+    let body = r#"
+        <shape type="rectangle"><emitter type="area"/></shape>
+        <shape type="rectangle"/>
+        <shape type="disk">
+            <bsdf type="diffuse"><rgb name="reflectance" value="0.3"/></bsdf>
+            <emitter type="area"/>
+        </shape>"#;
+    let lookat = r#"<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#;
+    let s = xml("emitter-bsdf.xml", &with_camera(lookat, body), &[]).unwrap();
+    let diffuse = |r: f32| Bsdf::Diffuse {
+        reflectance: Texture::Constant(Spectrum::splat(r)),
+        two_sided: false,
+    };
+    assert!(s.surfaces[0].bsdf == diffuse(0.0), "{:?}", s.surfaces[0].bsdf);
+    assert!(s.surfaces[1].bsdf == diffuse(0.5), "{:?}", s.surfaces[1].bsdf);
+    assert!(s.surfaces[2].bsdf == diffuse(0.3), "{:?}", s.surfaces[2].bsdf);
 }

@@ -419,9 +419,18 @@ fn sample_light(
         return DirectSample::NONE;
     }
     let origin = ng.map_or(p, |n| offset_origin(p, n, ls.wi));
-    let reach =
-        if matches!(light, Light::Area { .. }) { ls.distance * (1.0 - 1e-4) } else { ls.distance };
-    let tr = shadow_transmittance(scene, Ray::new(origin, ls.wi), reach, medium, sampler, counters);
+    // Aim from the offset origin at the sampled point itself: the offset moves the origin
+    // towards the light, and along `wi` the light's own surface would then lie closer than
+    // `distance`, by offset / cos at the light, and block the ray (far from a light, where the
+    // offset grows with the coordinates, and at grazing angles on the light).
+    let (dir, reach) = if matches!(light, Light::Area { .. }) {
+        let to = p + ls.wi * ls.distance - origin;
+        let length = to.length();
+        (to / length, length * (1.0 - 1e-4))
+    } else {
+        (ls.wi, ls.distance)
+    };
+    let tr = shadow_transmittance(scene, Ray::new(origin, dir), reach, medium, sampler, counters);
     if tr.max_element() <= 0.0 {
         return DirectSample::NONE;
     }

@@ -1,5 +1,5 @@
 //! Shapes with their BSDFs, textures, media and area emitters, and the other emitters, mapped
-//! onto `ShapeDesc`, `BsdfDesc` and `LightDesc`. Mitsuba's defaults apply (diffuse 0.5, unit
+//! onto `ShapeDesc`, `BsdfDesc` and `LightDesc`. Mitsuba's defaults apply (diffuse 0.5, black on an emitting shape, unit
 //! intensities and radiances, spot cutoff 20 degrees); plugins zerovar lacks are errors that
 //! name them.
 
@@ -73,6 +73,18 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         }
     };
     p.finish()?;
+    // Mitsuba gives an emitting shape without a <bsdf> a black diffuse one: the light's own
+    // surface reflects nothing (any other shape gets the reflecting diffuse 0.5 default).
+    let bsdf = match bsdf {
+        None if emitter.is_some() => Some(BsdfDesc {
+            kind: "diffuse".into(),
+            reflectance: Some(TextureDesc::Constant(Rgb::Grey(0.0))),
+            two_sided: None,
+            int_ior: None,
+            ext_ior: None,
+        }),
+        b => b,
+    };
     let textured =
         bsdf.as_ref().is_some_and(|b| matches!(b.reflectance, Some(TextureDesc::Checkerboard(_))));
     if o.kind == "obj" && flip_uv && textured {

@@ -1,0 +1,230 @@
+//! Validation against Mitsuba 3: each scene of tests/data/mitsuba/ is rendered by zerovar and
+//! compared per pixel with Mitsuba 3's image of the same XML file (`scalar_rgb`, the mean and
+//! standard error of 32 independent renders, made by tools/mitsuba-references.py).
+//!
+//! Per pixel-channel, z = (ours - theirs) / sqrt(se_ours^2 + se_theirs^2) is about standard
+//! normal when both renderers compute the same image. The checks are statistics of z whose
+//! thresholds follow from that: the fraction of |z| > 3 (expected 0.27%, allowed 2%: Mitsuba's
+//! standard error comes from 32 runs, so z has slightly heavier tails than a normal), the mean of
+//! z (standard deviation 1/sqrt(N) over N pixel-channels, allowed 4 of them), and for each image
+//! quadrant the difference of the summed pixel values over its standard error (allowed 4.5). Each
+//! scene also checks that the same statistics reject our image scaled by 1.05, so a test that
+//! passes is one that could have failed.
+//!
+//! With `ZEROVAR_MITSUBA_DEBUG` set, each test prints both images (green, every other pixel)
+//! and the pixel-channels with the largest |z|.
+
+use crate::common::repo;
+use std::path::Path;
+use zerovar::render::{Budget, RenderOptions, render};
+
+/// A reference image: mean and per-pixel standard error, row-major RGB.
+struct Reference {
+    width: usize,
+    height: usize,
+    mean: Vec<[f32; 3]>,
+    stderr: Vec<[f32; 3]>,
+}
+
+/// Reads the mean (channels R, G, B) and standard error (a layer named `stderr`, or channels
+/// `stderr.R`, `stderr.G`, `stderr.B`) of a reference EXR.
+fn read_reference(path: &Path) -> Reference {
+    let image = exr::prelude::read_all_flat_layers_from_file(path)
+        .unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let size = image.attributes.display_window.size;
+    let (width, height) = (size.width(), size.height());
+    let mut mean = vec![[f32::NAN; 3]; width * height];
+    let mut stderr = mean.clone();
+    for layer in &image.layer_data {
+        let layer_is_error = layer.attributes.layer_name.as_ref().is_some_and(|n| n.eq("stderr"));
+        for channel in &layer.channel_data.list {
+            let name = channel.name.to_string();
+            let (is_error, component) = match name.rsplit_once('.') {
+                Some((prefix, c)) => (layer_is_error || prefix == "stderr", c.to_string()),
+                None => (layer_is_error, name.clone()),
+            };
+            let Some(c) = ["R", "G", "B"].iter().position(|&x| x == component) else { continue };
+            let target = if is_error { &mut stderr } else { &mut mean };
+            for (i, v) in channel.sample_data.values_as_f32().enumerate() {
+                target[i][c] = v;
+            }
+        }
+    }
+    let all = mean.iter().chain(&stderr).flatten();
+    assert!(all.clone().all(|v| v.is_finite()), "{}: missing channels", path.display());
+    Reference { width, height, mean, stderr }
+}
+
+/// The statistics of z of one comparison.
+#[derive(Debug)]
+struct Agreement {
+    /// Fraction of pixel-channels with |z| > 3.
+    outliers: f64,
+    /// Mean z over all pixel-channels, in units of its standard deviation 1/sqrt(N) (reported,
+    /// not asserted: see `passes`).
+    mean_z: f64,
+    /// (sum ours - sum theirs) / sqrt(sum of both variances) over the whole image.
+    whole: f64,
+    /// Per quadrant, (sum ours - sum theirs) / sqrt(sum of both variances).
+    quadrants: [f64; 4],
+}
+
+impl Agreement {
+    /// Whether the images agree. The bias check is on the image's pooled difference rather than
+    /// on the mean of z: where a pixel's samples are skewed (a point light in fog), its estimated
+    /// standard error grows with its estimate, so z leans to one side while the difference
+    /// itself is unbiased; f-camera-in-fog shows a mean z of -11.5/sqrt(N) with a pooled
+    /// difference of -0.4 standard errors.
+    fn passes(&self) -> bool {
+        self.outliers < 0.02
+            && self.whole.abs() < 4.0
+            && self.quadrants.iter().all(|q| q.abs() < 4.5)
+    }
+}
+
+fn compare(ours: &[[f32; 3]], our_se: &[[f32; 3]], theirs: &Reference, scale: f32) -> Agreement {
+    let (w, h) = (theirs.width, theirs.height);
+    let (mut outliers, mut sum_z, mut n) = (0usize, 0.0f64, 0usize);
+    let mut quad = [(0.0f64, 0.0f64); 4];
+    for y in 0..h {
+        for x in 0..w {
+            let i = y * w + x;
+            let q = usize::from(x >= w / 2) + 2 * usize::from(y >= h / 2);
+            for c in 0..3 {
+                let o = f64::from(ours[i][c] * scale);
+                let so = f64::from(our_se[i][c] * scale);
+                let t = f64::from(theirs.mean[i][c]);
+                let st = f64::from(theirs.stderr[i][c]);
+                let var = so * so + st * st;
+                let d = o - t;
+                // A pixel that neither renderer saw vary (a plain background) must agree to
+                // rounding.
+                let z = if var > 1e-14 {
+                    d / var.sqrt()
+                } else if d.abs() <= 1e-5 * t.abs().max(1.0) {
+                    0.0
+                } else {
+                    d.signum() * 1e3
+                };
+                outliers += usize::from(z.abs() > 3.0);
+                sum_z += z;
+                n += 1;
+                quad[q].0 += d;
+                quad[q].1 += var;
+            }
+        }
+    }
+    let pooled = |(d, v): (f64, f64)| if v > 0.0 { d / v.sqrt() } else { 0.0 };
+    let whole = pooled(quad.iter().fold((0.0, 0.0), |a, q| (a.0 + q.0, a.1 + q.1)));
+    let quadrants = quad.map(pooled);
+    Agreement {
+        outliers: outliers as f64 / n as f64,
+        mean_z: sum_z / n as f64 * (n as f64).sqrt(),
+        whole,
+        quadrants,
+    }
+}
+
+/// Renders `tests/data/mitsuba/{name}.xml` with zerovar at `spp` and compares it with
+/// `{name}.exr`.
+fn validate(name: &str, spp: u32) {
+    let xml = repo(&format!("tests/data/mitsuba/{name}.xml"));
+    let scene = zerovar::scene::load(&xml, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let theirs = read_reference(&repo(&format!("tests/data/mitsuba/{name}.exr")));
+    let (w, h) = (theirs.width, theirs.height);
+    let result = render(&scene, &RenderOptions::unguided(Budget::Samples(spp), 11), &|_, _| true)
+        .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!((result.film.width, result.film.height), (w as u32, h as u32), "{name}");
+    let ours: Vec<[f32; 3]> = result.film.pixels.iter().map(|p| p.mean()).collect();
+    let se: Vec<[f32; 3]> = result.film.pixels.iter().map(|p| p.std_error()).collect();
+    let agreement = compare(&ours, &se, &theirs, 1.0);
+    if std::env::var_os("ZEROVAR_MITSUBA_DEBUG").is_some() {
+        for y in (0..h).step_by(2) {
+            let row: Vec<String> = (0..w)
+                .step_by(2)
+                .map(|x| {
+                    let i = y * w + x;
+                    format!("{:.2}/{:.2}", ours[i][1], theirs.mean[i][1])
+                })
+                .collect();
+            println!("{}", row.join(" "));
+        }
+        let mut worst: Vec<(f32, usize, usize)> = (0..w * h)
+            .flat_map(|i| (0..3).map(move |c| (i, c)))
+            .map(|(i, c)| {
+                let v = se[i][c].powi(2) + theirs.stderr[i][c].powi(2);
+                ((ours[i][c] - theirs.mean[i][c]) / v.sqrt().max(1e-9), i, c)
+            })
+            .collect();
+        worst.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+        for &(z, i, c) in &worst[..8] {
+            println!(
+                "z {z:+.1} at ({}, {}) channel {c}: {} +- {} vs {} +- {}",
+                i % w,
+                i / w,
+                ours[i][c],
+                se[i][c],
+                theirs.mean[i][c],
+                theirs.stderr[i][c]
+            );
+        }
+    }
+    println!(
+        "{name}: |z| > 3 in {:.2}% of pixel-channels, mean z {:+.2} / sqrt(N), pooled {:+.2}, \
+         quadrants {:+.2?}",
+        100.0 * agreement.outliers,
+        agreement.mean_z,
+        agreement.whole,
+        agreement.quadrants
+    );
+    assert!(agreement.passes(), "{name}: zerovar disagrees with Mitsuba 3: {agreement:?}");
+    let scaled = compare(&ours, &se, &theirs, 1.05);
+    println!("{name}, ours x 1.05: {scaled:?}");
+    assert!(!scaled.passes(), "{name}: the comparison does not see a 5% change: {scaled:?}");
+}
+
+#[test]
+fn reference_format_reads_with_the_crate_reader() {
+    let path = repo("tests/data/mitsuba/a-hg-sphere.exr");
+    let (w, h, mean) = zerovar::output::read_exr(&path).unwrap();
+    let r = read_reference(&path);
+    assert_eq!((w, h), (r.width, r.height));
+    assert!(mean == r.mean, "read_exr and the reference reader differ");
+    assert!(r.stderr.iter().flatten().all(|&s| s >= 0.0));
+    assert!(r.stderr.iter().flatten().any(|&s| s > 0.0));
+}
+
+#[test]
+fn mitsuba_a_hg_sphere_point_and_constant() {
+    validate("a-hg-sphere", 1024);
+}
+
+#[test]
+fn mitsuba_b_cloud_grid_directional() {
+    validate("b-cloud-directional", 1024);
+}
+
+#[test]
+fn mitsuba_c_chromatic_medium_constant() {
+    validate("c-chromatic-constant", 1024);
+}
+
+#[test]
+fn mitsuba_d_medium_in_glass_spot() {
+    validate("d-glass-spot", 1024);
+}
+
+#[test]
+fn mitsuba_e_area_light_checkerboard_medium_cube() {
+    validate("e-area-checker-cube", 1024);
+}
+
+#[test]
+fn mitsuba_f_camera_in_fog_disk() {
+    validate("f-camera-in-fog", 4096);
+}
+
+#[test]
+fn mitsuba_g_envmap_sphere() {
+    validate("g-envmap-sphere", 1024);
+}
