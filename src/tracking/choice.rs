@@ -19,8 +19,19 @@ pub enum TrackerChoice {
 
 /// A tracker that cannot apply to a medium, or an unknown tracker name.
 #[derive(Debug, Error)]
-#[error("{0}")]
-pub struct TrackerError(pub String);
+pub enum TrackerError {
+    /// No tracker has this name.
+    #[error("unknown tracker `{name}`; choose auto or one of {known}")]
+    Unknown {
+        /// The name given.
+        name: String,
+        /// The trackers there are, comma-separated.
+        known: String,
+    },
+    /// The forced tracker cannot handle a medium of the scene.
+    #[error("--tracker: {0}")]
+    Inapplicable(String),
+}
 
 impl FromStr for TrackerChoice {
     type Err = TrackerError;
@@ -35,10 +46,7 @@ impl FromStr for TrackerChoice {
         Tracker::ALL.iter().find(|t| t.name() == s).map(|t| TrackerChoice::Force(*t)).ok_or_else(
             || {
                 let names: Vec<_> = Tracker::ALL.iter().map(Tracker::name).collect();
-                TrackerError(format!(
-                    "unknown tracker `{s}`; choose auto or one of {}",
-                    names.join(", ")
-                ))
+                TrackerError::Unknown { name: s.to_string(), known: names.join(", ") }
             },
         )
     }
@@ -111,7 +119,7 @@ impl TrackerChoice {
         match self {
             TrackerChoice::Auto => Ok(Tracker::for_medium(medium)),
             TrackerChoice::Force(t) => {
-                t.check(medium).map(|()| *t).map_err(|e| TrackerError(format!("--tracker: {e}")))
+                t.check(medium).map(|()| *t).map_err(TrackerError::Inapplicable)
             }
         }
     }
