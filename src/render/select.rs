@@ -27,13 +27,13 @@ use std::time::Instant;
 /// the render times of the nine example and bench scenes, each unguided, fully guided and with
 /// each component alone (45 renders, 1 thread, 8 spp). The fit predicts each scene's cost of
 /// a fully guided sample relative to an unguided one within 35% (README, "Guiding").
-const NS_PER_PATH: f64 = 93.0;
-const NS_PER_SEGMENT: f64 = 91.0;
-const NS_PER_SCATTER: f64 = 253.0;
-const NS_PER_DENSITY_LOOKUP: f64 = 162.0;
+const NS_PER_PATH: f64 = 92.0;
+const NS_PER_SEGMENT: f64 = 92.0;
+const NS_PER_SCATTER: f64 = 264.0;
+const NS_PER_DENSITY_LOOKUP: f64 = 168.0;
 const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 58.0;
-const NS_PER_FIELD_LOOKUP: f64 = 136.0;
-const NS_PER_PRODUCT: f64 = 1630.0;
+const NS_PER_FIELD_LOOKUP: f64 = 125.0;
+const NS_PER_PRODUCT: f64 = 1359.0;
 
 /// What the pilot of adaptive guiding decided.
 #[derive(Clone, Debug, Serialize)]
