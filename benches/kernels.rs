@@ -38,8 +38,8 @@ fn trained(scene: &Scene) -> TrainedField {
 
 /// A camera ray through a random point of the film.
 fn camera_ray(scene: &Scene, s: &mut Sampler) -> Ray {
-    let [w, h] = scene.camera.resolution.map(|r| r as f32);
-    scene.camera.ray(s.next_2d() * Vec2::new(w, h))
+    let [w, h] = scene.camera().resolution.map(|r| r as f32);
+    scene.camera().ray(s.next_2d() * Vec2::new(w, h))
 }
 
 fn phase(c: &mut Criterion) {
@@ -56,7 +56,7 @@ fn phase(c: &mut Criterion) {
 
 fn transmittance(c: &mut Criterion) {
     let scene = load("scenes/cloud.toml");
-    let medium = scene.camera_medium;
+    let medium = scene.camera_medium();
     let mut s = Sampler::new(2, 0, 0);
     let mut counters = Counters::default();
     // Shadow rays from the camera to random points across the cloud's bounding box.
@@ -65,7 +65,7 @@ fn transmittance(c: &mut Criterion) {
         b.iter(|| {
             let u = Vec3A::new(s.next_1d(), s.next_1d(), s.next_1d());
             let target = bounds.min + u * (bounds.max - bounds.min);
-            let origin = scene.camera.origin();
+            let origin = scene.camera().origin();
             let to = target - origin;
             let ray = Ray::new(origin, to.normalize());
             black_box(shadow_transmittance(&scene, ray, to.length(), medium, &mut s, &mut counters))
@@ -75,7 +75,7 @@ fn transmittance(c: &mut Criterion) {
 
 fn free_flight(c: &mut Criterion) {
     let scene = load("scenes/cloud.toml");
-    let medium = &scene.media[0];
+    let medium = &scene.media()[0];
     let mut group = c.benchmark_group("free-flight-cloud");
     let trackers = [
         Tracker::Delta,
@@ -114,7 +114,7 @@ fn free_flight(c: &mut Criterion) {
 fn guided_distance(c: &mut Criterion) {
     let scene = load("scenes/fog-room.toml");
     let field = trained(&scene);
-    let medium = &scene.media[scene.camera_medium.expect("the camera is in the fog") as usize];
+    let medium = &scene.media()[scene.camera_medium().expect("the camera is in the fog") as usize];
     let mut cache = FieldCache::with_direct(&field.field, field.direct.as_ref(), false);
     let mut s = Sampler::new(3, 0, 0);
     let mut counters = Counters::default();
@@ -141,7 +141,7 @@ fn paths<C: RadianceCache>(
         let mut s = Sampler::new(4, 0, i);
         let ray = camera_ray(scene, &mut s);
         let mut ctx = WalkContext { cache: &mut *cache, pixel: None, recorder: None };
-        sum += radiance(settings, scene, ray, scene.camera_medium, &mut ctx, &mut s, counters).x;
+        sum += radiance(settings, scene, ray, scene.camera_medium(), &mut ctx, &mut s, counters).x;
     }
     sum
 }

@@ -26,13 +26,13 @@ fn load(path: &str, extra: Option<(&str, &str)>) -> Scene {
 /// `PATHS` camera paths over the whole film; returns the summed radiance.
 fn paths(scene: &Scene, first: u64, counters: &mut Counters) -> f32 {
     let integrator = VolPath::from_scene(scene);
-    let [w, h] = scene.camera.resolution.map(|r| r as f32);
+    let [w, h] = scene.camera().resolution.map(|r| r as f32);
     let mut sum = 0.0;
     for i in first..first + PATHS {
         let mut s = Sampler::new(1, 0, i);
         let film = s.next_2d() * Vec2::new(w, h);
-        let ray = scene.camera.ray(film);
-        sum += integrator.radiance(scene, ray, scene.camera_medium, &mut s, counters).x;
+        let ray = scene.camera().ray(film);
+        sum += integrator.radiance(scene, ray, scene.camera_medium(), &mut s, counters).x;
     }
     sum
 }

@@ -28,25 +28,25 @@ struct Node {
 
 /// A primitive reference: shape index and primitive index within the shape.
 #[derive(Clone, Copy, Debug)]
-pub struct PrimRef {
+pub(crate) struct PrimRef {
     /// Shape index.
-    pub shape: u32,
+    pub(crate) shape: u32,
     /// Primitive index within the shape (triangle number for meshes).
-    pub index: u32,
+    pub(crate) index: u32,
 }
 
 /// The closest intersection found by a traversal.
 #[derive(Clone, Copy, Debug)]
-pub struct BvhHit {
+pub(crate) struct BvhHit {
     /// The primitive hit.
-    pub prim: PrimRef,
+    pub(crate) prim: PrimRef,
     /// Parametric hit data.
-    pub hit: PrimHit,
+    pub(crate) hit: PrimHit,
 }
 
 /// The hierarchy.
 #[derive(Clone, Debug, Default)]
-pub struct Bvh {
+pub(crate) struct Bvh {
     nodes: Vec<Node>,
     prims: Vec<PrimRef>,
 }
@@ -59,7 +59,7 @@ struct BuildPrim {
 
 impl Bvh {
     /// Builds the hierarchy over all primitives of `shapes`.
-    pub fn build(shapes: &[Geometry]) -> Self {
+    pub(crate) fn build(shapes: &[Geometry]) -> Self {
         let mut items: Vec<BuildPrim> = Vec::new();
         for (s, g) in shapes.iter().enumerate() {
             for i in 0..g.primitive_count() as u32 {
@@ -85,7 +85,7 @@ impl Bvh {
     }
 
     /// Bounds of the whole scene.
-    pub fn bounds(&self) -> Aabb {
+    pub(crate) fn bounds(&self) -> Aabb {
         self.nodes.first().map_or(Aabb::EMPTY, |n| n.bounds)
     }
 
@@ -147,7 +147,12 @@ impl Bvh {
 
     /// The closest intersection along `ray` within `(0, t_max)`.
     #[inline]
-    pub fn intersect(&self, shapes: &[Geometry], ray: &Ray, mut t_max: f32) -> Option<BvhHit> {
+    pub(crate) fn intersect(
+        &self,
+        shapes: &[Geometry],
+        ray: &Ray,
+        mut t_max: f32,
+    ) -> Option<BvhHit> {
         if self.nodes.is_empty() {
             return None;
         }

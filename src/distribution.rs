@@ -3,7 +3,7 @@
 
 /// A distribution over indices proportional to non-negative weights.
 #[derive(Clone, Debug, Default)]
-pub struct Distribution1D {
+pub(crate) struct Distribution1D {
     cdf: Vec<f64>,
     total: f64,
 }
@@ -11,7 +11,7 @@ pub struct Distribution1D {
 impl Distribution1D {
     /// A distribution proportional to `weights`; `None` when they sum to zero or any weight is
     /// negative or not finite.
-    pub fn new(weights: impl IntoIterator<Item = f64>) -> Option<Self> {
+    pub(crate) fn new(weights: impl IntoIterator<Item = f64>) -> Option<Self> {
         let mut acc = 0.0;
         let mut cdf = Vec::new();
         for w in weights {
@@ -25,23 +25,13 @@ impl Distribution1D {
     }
 
     /// Sum of the weights.
-    pub fn total(&self) -> f64 {
+    pub(crate) fn total(&self) -> f64 {
         self.total
-    }
-
-    /// Number of entries.
-    pub fn len(&self) -> usize {
-        self.cdf.len()
-    }
-
-    /// Whether there are no entries (never true for a constructed distribution).
-    pub fn is_empty(&self) -> bool {
-        self.cdf.is_empty()
     }
 
     /// Probability of index `i`.
     #[inline]
-    pub fn prob(&self, i: usize) -> f64 {
+    pub(crate) fn prob(&self, i: usize) -> f64 {
         let lo = if i == 0 { 0.0 } else { self.cdf[i - 1] };
         (self.cdf[i] - lo) / self.total
     }
@@ -49,7 +39,7 @@ impl Distribution1D {
     /// Picks an index for `u` in [0, 1); also returns `u` rescaled to [0, 1) within the chosen
     /// interval, so one number can drive a further choice.
     #[inline]
-    pub fn sample(&self, u: f32) -> (usize, f32) {
+    pub(crate) fn sample(&self, u: f32) -> (usize, f32) {
         let target = u as f64 * self.total;
         // Entries of zero weight have empty intervals and are never chosen.
         let i = self.cdf.partition_point(|&c| c <= target).min(self.cdf.len() - 1);

@@ -77,15 +77,27 @@ impl PixelSum {
 /// A film of `width * height` pixels.
 #[derive(Clone, Debug)]
 pub struct Film {
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// Row-major pixel sums.
-    pub pixels: Vec<PixelSum>,
+    pub(crate) width: u32,
+    pub(crate) height: u32,
+    pub(crate) pixels: Vec<PixelSum>,
 }
 
 impl Film {
+    /// Width in pixels.
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    /// Height in pixels.
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// The pixel sums, row-major, `width * height` of them.
+    pub fn pixels(&self) -> &[PixelSum] {
+        &self.pixels
+    }
+
     /// An empty film.
     pub fn new(width: u32, height: u32) -> Self {
         Self { width, height, pixels: vec![PixelSum::default(); (width * height) as usize] }

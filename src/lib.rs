@@ -1,26 +1,42 @@
 //! zerovar: a volumetric path tracer built around zero-variance path guiding.
 //!
-//! The library holds everything the `zerovar` binary does: scene loading and validation
-//! (`scene`), geometry (`shapes`, `accel`), surfaces and phase functions (`bsdf`, `phase`),
-//! participating media (`media`) and the estimators that move through them (`tracking`),
-//! `lights`, the `camera`, the `integrators`, and the `render` session that drives them over
-//! tiles, accumulates a `film` and writes images (`output`).
+//! The library holds everything the `zerovar` binary does (the binary only parses arguments):
+//! load a scene from a file ([`scene::load`]) or build one in code ([`SceneBuilder`]), set
+//! [`RenderOptions`] (checked by [`RenderOptions::validate`]), train a guiding field, render
+//! to an in-memory image, read the counters, report progress and cancel through a callback.
 //!
-//! ```no_run
-//! use zerovar::guided::Components;
-//! use zerovar::render::{Budget, RenderOptions, render};
-//! let scene = zerovar::scene::load("scenes/fog-sphere.toml".as_ref(), &[]).unwrap();
-//! let mut options = RenderOptions::unguided(Budget::Samples(16), 0);
-//! options.guiding.components = Components::FULL; // train a field, then render with it
-//! let result = render(&scene, &options, &|_, _| true).unwrap();
-//! println!("mean pixel {:?}", result.film.average());
 //! ```
+//! use zerovar::guided::Components;
+//! use zerovar::render::{Budget, TrainBudget, render};
+//! use zerovar::RenderOptions;
+//!
+//! let scene = zerovar::scene::load("scenes/fog-sphere.toml".as_ref(), &[]).unwrap();
+//! let mut options = RenderOptions::unguided(Budget::Samples(2), 7);
+//! options.guiding.components = Components::FULL; // train a field, then render with it
+//! options.guiding.train = TrainBudget::Passes(2);
+//! // The callback sees (done, total) and may cancel by returning false.
+//! let result = render(&scene, &options, &|_done, _total| true).unwrap();
+//! assert_eq!(result.spp, 2);
+//! assert!(result.image.iter().flatten().all(|v| v.is_finite()));
+//! println!("trained {:?}, mean pixel {:?}", result.training.map(|t| t.spp), result.film.average());
+//! ```
+//!
+//! The modules come in two tiers. The **application API**, what a host program needs, is
+//! re-exported here: [`scene`] (load, [`SceneBuilder`], the element descriptions of
+//! [`scene::desc`]), [`render`] (options, training, rendering, cancellation), [`guided`]'s
+//! [`TrainedField`], [`film`] and [`output`] (EXR/PNG), [`stats`], [`metrics`] and [`compare`].
+//! The **building blocks** are public for research code that assembles its own integrator
+//! or extends the renderer: [`media`] (with the [`media::DensityFunction`] trait for host
+//! densities), [`tracking`] (free-flight and transmittance estimators), [`phase`], [`bsdf`],
+//! [`lights`], [`camera`], [`shapes`], [`integrators`], [`math`], [`rng`], [`transform`] and
+//! [`plot`]; they follow the same rules but change more freely between versions. The
+//! acceleration structure and sampling tables are private.
 
-pub mod accel;
+mod accel;
 pub mod bsdf;
 pub mod camera;
 pub mod compare;
-pub mod distribution;
+mod distribution;
 pub mod film;
 pub mod guided;
 pub mod integrators;
@@ -38,3 +54,8 @@ pub mod shapes;
 pub mod stats;
 pub mod tracking;
 pub mod transform;
+
+pub use film::Film;
+pub use guided::TrainedField;
+pub use render::{Budget, GuidingOptions, OptionsError, RenderError, RenderOptions, RenderResult};
+pub use scene::{Scene, SceneBuilder, SceneError};

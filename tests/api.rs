@@ -79,7 +79,7 @@ fn a_host_density_renders_like_the_same_grid() {
     as_grid.replace_medium("m", medium(DensityField::Grid(grid()))).unwrap();
     let mut as_host = scene(SCENE);
     as_host.replace_medium("m", medium(DensityField::Custom(Arc::new(Host(grid()))))).unwrap();
-    assert_eq!(as_host.media[0].name, "m");
+    assert_eq!(as_host.media()[0].name, "m");
     let a =
         render(&as_grid, &RenderOptions::unguided(Budget::Samples(512), 1), &|_, _| true).unwrap();
     let b =
@@ -121,7 +121,7 @@ fn cancelling_from_the_callback_returns_whole_passes() {
     assert!(r.cancelled);
     assert!(r.spp < total_spp, "{} spp after cancelling", r.spp);
     assert!(calls.load(std::sync::atomic::Ordering::Relaxed) >= 1);
-    assert!(r.film.pixels.iter().all(|p| p.count == r.spp), "pixels hold partial passes");
+    assert!(r.film.pixels().iter().all(|p| p.count == r.spp), "pixels hold partial passes");
     assert!(r.image.iter().flatten().all(|v| v.is_finite()));
     assert!(start.elapsed().as_secs_f64() < 5.0, "cancelling took {:?}", start.elapsed());
     // Not cancelling renders everything.
@@ -132,6 +132,50 @@ fn cancelling_from_the_callback_returns_whole_passes() {
     guided.guiding.components = zerovar::guided::Components::FULL;
     let err = render(&s, &guided, &|_, _| false).unwrap_err();
     assert!(matches!(err, zerovar::render::RenderError::Cancelled), "{err}");
+}
+
+#[test]
+fn options_assembled_in_code_are_validated_before_any_work() {
+    use std::time::Duration;
+    use zerovar::render::{OptionsError, RenderError, TrainBudget, train};
+    let s = scene(SCENE);
+    let good = || {
+        let mut o = RenderOptions::unguided(Budget::Samples(1), 1);
+        o.guiding.components = zerovar::guided::Components::FULL;
+        o
+    };
+    let cases: Vec<(RenderOptions, OptionsError)> = vec![
+        (RenderOptions { budget: Budget::Samples(0), ..good() }, OptionsError::ZeroSamples),
+        (RenderOptions { budget: Budget::Time(Duration::ZERO), ..good() }, OptionsError::ZeroTime),
+        (RenderOptions { threads: Some(0), ..good() }, OptionsError::ZeroThreads),
+        {
+            let mut o = good();
+            o.guiding.alpha = 1.5;
+            (o, OptionsError::Alpha(1.5))
+        },
+        {
+            let mut o = good();
+            o.guiding.train = TrainBudget::Passes(21);
+            (o, OptionsError::TrainPasses(21))
+        },
+        {
+            let mut o = good();
+            o.guiding.train = TrainBudget::Time(Duration::ZERO);
+            (o, OptionsError::ZeroTrainTime)
+        },
+    ];
+    for (options, expected) in cases {
+        // Any work would call the callback; validation must refuse before it.
+        let refuse = |_: u64, _: u64| -> bool { panic!("work started for {expected:?}") };
+        let err = render(&s, &options, &refuse).unwrap_err();
+        assert!(matches!(&err, RenderError::Options(e) if *e == expected), "{err}");
+        let err = train(&s, &options, &refuse).unwrap_err();
+        assert!(matches!(&err, RenderError::Options(e) if *e == expected), "{err}");
+    }
+    let mut nan = good();
+    nan.guiding.alpha = f32::NAN;
+    assert!(matches!(nan.validate(), Err(OptionsError::Alpha(a)) if a.is_nan()));
+    assert_eq!(good().validate(), Ok(()));
 }
 
 /// The fog sphere of `scenes/fog-sphere.toml`, assembled in code at `resolution`.
@@ -180,7 +224,7 @@ fn a_scene_built_in_code_renders_exactly_as_its_file() {
     let options = RenderOptions::unguided(Budget::Samples(2), 3);
     let a = render(&built, &options, &|_, _| true).unwrap();
     let b = render(&loaded, &options, &|_, _| true).unwrap();
-    assert_eq!(a.film.pixels, b.film.pixels);
+    assert_eq!(a.film.pixels(), b.film.pixels());
     assert!(a.image.iter().any(|p| p[0] > 0.0), "the image is not black");
 
     // Invalid elements are the same errors as in a file, naming the element.

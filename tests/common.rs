@@ -42,8 +42,8 @@ pub(crate) fn estimate_region(
     for i in 0..n {
         let mut s = Sampler::new(seed, 0, i);
         let film = region.0 + (region.1 - region.0) * s.next_2d();
-        let ray = scene.camera.ray(film);
-        let l = integrator.radiance(scene, ray, scene.camera_medium, &mut s, &mut counters);
+        let ray = scene.camera().ray(film);
+        let l = integrator.radiance(scene, ray, scene.camera_medium(), &mut s, &mut counters);
         assert!(l.is_finite(), "non-finite radiance {l}");
         for c in 0..3 {
             est[c].push(l[c] as f64);
@@ -60,9 +60,9 @@ pub(crate) fn repo(path: &str) -> PathBuf {
 /// Mean luminance of each quadrant of a film with its standard error, from the per-pixel
 /// sample variances.
 pub(crate) fn quadrant_means(f: &zerovar::film::Film) -> [(f64, f64); 4] {
-    let (w, h) = (f.width as usize, f.height as usize);
+    let (w, h) = (f.width() as usize, f.height() as usize);
     let (mut sum, mut var, mut count) = ([0.0f64; 4], [0.0f64; 4], [0usize; 4]);
-    for (i, p) in f.pixels.iter().enumerate() {
+    for (i, p) in f.pixels().iter().enumerate() {
         let k = (i % w >= w / 2) as usize + 2 * (i / w >= h / 2) as usize;
         let n = p.count as f64;
         let m = zerovar::math::luminance(glam::Vec3A::from_array(p.mean())) as f64;

@@ -71,7 +71,7 @@ fn medium_of(text: &str) -> Medium {
     let s = scene(&format!(
         "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 30\nresolution = [4, 4]\n\n[media.m]\n{text}\n\n[[lights]]\ntype = \"constant\"\nradiance = 1\n"
     ));
-    s.media[0].clone()
+    s.media()[0].clone()
 }
 
 #[test]
@@ -154,13 +154,13 @@ fn analytic_cache_gives_zero_variance() {
         let mut spread = MeanEstimate::default();
         for i in 0..2000 {
             let mut sampler = Sampler::new(1, 0, i);
-            let ray = s.camera.ray(sampler.next_2d() * 4.0);
+            let ray = s.camera().ray(sampler.next_2d() * 4.0);
             let mut ctx = WalkContext { cache: &mut cache, pixel: Some(3.0), recorder: None };
             let l = walk::radiance(
                 &settings,
                 &s,
                 ray,
-                s.camera_medium,
+                s.camera_medium(),
                 &mut ctx,
                 &mut sampler,
                 &mut Counters::default(),
@@ -176,13 +176,13 @@ fn analytic_cache_gives_zero_variance() {
         let mut other = MeanEstimate::default();
         for i in 0..2000 {
             let mut sampler = Sampler::new(1, 0, i);
-            let ray = s.camera.ray(sampler.next_2d() * 4.0);
+            let ray = s.camera().ray(sampler.next_2d() * 4.0);
             let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None };
             let l = walk::radiance(
                 &unguided,
                 &s,
                 ray,
-                s.camera_medium,
+                s.camera_medium(),
                 &mut ctx,
                 &mut sampler,
                 &mut Counters::default(),
@@ -229,14 +229,14 @@ radiance = 1
         let n = 20_000;
         for i in 0..n {
             let mut sampler = Sampler::new(2, 0, i);
-            let ray = s.camera.ray(sampler.next_2d() * 8.0);
+            let ray = s.camera().ray(sampler.next_2d() * 8.0);
             let walks_before = counters.walks;
             let mut ctx = WalkContext { cache: &mut cache, pixel: Some(1.0), recorder: None };
             let l = walk::radiance(
                 &settings,
                 &s,
                 ray,
-                s.camera_medium,
+                s.camera_medium(),
                 &mut ctx,
                 &mut sampler,
                 &mut counters,
@@ -437,14 +437,14 @@ fn training_continuations_learn_the_light_found_by_later_next_event_estimates() 
     let mut samples = Vec::new();
     for i in 0..4000 {
         let mut sampler = Sampler::new(3, 0, i);
-        let ray = s.camera.ray(sampler.next_2d() * Vec2::new(12.0, 10.0));
+        let ray = s.camera().ray(sampler.next_2d() * Vec2::new(12.0, 10.0));
         let mut ctx =
             WalkContext { cache: &mut NoCache, pixel: None, recorder: Some(&mut recorder) };
         let l = walk::radiance(
             &settings,
             &s,
             ray,
-            s.camera_medium,
+            s.camera_medium(),
             &mut ctx,
             &mut sampler,
             &mut Counters::default(),

@@ -134,9 +134,9 @@ fn validate(name: &str, spp: u32) {
     let (w, h) = (theirs.width, theirs.height);
     let result = render(&scene, &RenderOptions::unguided(Budget::Samples(spp), 11), &|_, _| true)
         .unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!((result.film.width, result.film.height), (w as u32, h as u32), "{name}");
-    let ours: Vec<[f32; 3]> = result.film.pixels.iter().map(|p| p.mean()).collect();
-    let se: Vec<[f32; 3]> = result.film.pixels.iter().map(|p| p.std_error()).collect();
+    assert_eq!((result.film.width(), result.film.height()), (w as u32, h as u32), "{name}");
+    let ours: Vec<[f32; 3]> = result.film.pixels().iter().map(|p| p.mean()).collect();
+    let se: Vec<[f32; 3]> = result.film.pixels().iter().map(|p| p.std_error()).collect();
     let agreement = compare(&ours, &se, &theirs, 1.0);
     if std::env::var_os("ZEROVAR_MITSUBA_DEBUG").is_some() {
         for y in (0..h).step_by(2) {

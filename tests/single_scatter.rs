@@ -58,13 +58,14 @@ fn point_light_single_scattering_matches_quadrature() {
     for (sigma_t, albedo, g) in [(0.05, 0.8, 0.0f32), (0.1, 0.9, 0.7), (0.02, 1.0, -0.5)] {
         let s = scene(&scene_text(sigma_t, albedo, g as f64));
         let integrator = VolPath::from_scene(&s);
-        let ray = s.camera.ray(Vec2::splat(0.5));
+        let ray = s.camera().ray(Vec2::splat(0.5));
         let expected = reference(sigma_t, albedo, g, ray.direction);
         let mut counters = Counters::default();
         let est: MeanEstimate = (0..200_000)
             .map(|i| {
                 let mut sampler = Sampler::new(3, 0, i);
-                integrator.radiance(&s, ray, s.camera_medium, &mut sampler, &mut counters).x as f64
+                integrator.radiance(&s, ray, s.camera_medium(), &mut sampler, &mut counters).x
+                    as f64
             })
             .collect();
         est.assert_matches(expected, 4.5, &format!("single scattering sigma_t {sigma_t} g {g}"));

@@ -500,7 +500,7 @@ fn history_aware_spectral_tracking_keeps_the_channel_average_of_the_weight() {
 
 /// Per block of a 4x4 split of the image, per channel: the estimate of the block's mean.
 fn blocks(scene: &Scene, seed: u64, n: u64) -> Vec<[MeanEstimate; 3]> {
-    let [w, h] = scene.camera.resolution.map(|r| r as f32);
+    let [w, h] = scene.camera().resolution.map(|r| r as f32);
     let mut out = Vec::new();
     for by in 0..4 {
         for bx in 0..4 {
@@ -600,9 +600,9 @@ fn forced_trackers_that_cannot_apply_are_errors() {
     let mut cloud = small("scenes/cloud.toml", &[]);
     let e = cloud.set_tracker(TrackerChoice::Force(Tracker::Regular)).unwrap_err();
     assert!(e.to_string().contains("piecewise-constant"), "{e}");
-    assert_eq!(cloud.trackers, vec![Tracker::Decomposition]);
+    assert_eq!(cloud.trackers(), vec![Tracker::Decomposition]);
     cloud.set_tracker("spectral".parse().unwrap()).unwrap();
-    assert_eq!(cloud.trackers, vec![Tracker::Spectral]);
+    assert_eq!(cloud.trackers(), vec![Tracker::Spectral]);
     assert!("ray-marching".parse::<TrackerChoice>().is_ok());
     assert!("nonsense".parse::<TrackerChoice>().is_err());
 }
@@ -649,7 +649,7 @@ fn relmse_of_images() {
 #[ignore]
 fn bound_grid_statistics() {
     let scene = small("scenes/cloud.toml", &[]);
-    let zerovar::media::MediumKind::Heterogeneous(h) = &scene.media[0].kind else {
+    let zerovar::media::MediumKind::Heterogeneous(h) = &scene.media()[0].kind else {
         panic!("the cloud is heterogeneous")
     };
     let g = h.bound_grid();

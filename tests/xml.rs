@@ -43,13 +43,13 @@ fn fog_sphere_xml_renders_exactly_as_the_toml() {
     let toml = [("resolution = [320, 240]", "resolution = [40, 30]")];
     let a = edited("scenes/fog-sphere.toml", &toml, &[]);
     let b = edited("scenes/xml/fog-sphere.xml", &SMALL_XML, &[]);
-    assert_eq!(b.settings.spp, 256);
+    assert_eq!(b.settings().spp, 256);
     assert!(image(&a, 5) == image(&b, 5), "fog sphere: XML and TOML images differ");
     // -D overrides a <default> as it overrides a [defaults] entry.
     let a = edited("scenes/fog-sphere.toml", &toml, &[("density", "4"), ("spp", "3")]);
     let b = edited("scenes/xml/fog-sphere.xml", &SMALL_XML, &[("density", "4"), ("spp", "3")]);
-    assert_eq!(b.settings.spp, 3);
-    assert_eq!(b.media[0].majorant().to_array(), [4.0; 3]);
+    assert_eq!(b.settings().spp, 3);
+    assert_eq!(b.media()[0].majorant().to_array(), [4.0; 3]);
     assert!(image(&a, 6) == image(&b, 6), "fog sphere with -D: XML and TOML images differ");
 }
 
@@ -70,7 +70,7 @@ fn cloud_xml_renders_exactly_as_the_toml_with_a_delta_sun() {
     let vol = repo("scenes/data/cloud.vol");
     let scene = scene.replace("../data/cloud.vol", vol.to_str().unwrap());
     let b = load_str(&dir.join("cloud.xml"), &scene, &[]).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(b.settings.max_depth, Some(64));
+    assert_eq!(b.settings().max_depth, Some(64));
     assert!(image(&a, 7) == image(&b, 7), "cloud: XML and TOML images differ");
 }
 
@@ -133,7 +133,7 @@ transform = [{ scale = [2, 1, 1] }, { rotate = { axis = [1, 0, 0], angle = -90 }
     for to_world in [lookat, chain, matrix] {
         let s = xml("camera.xml", &with_camera(to_world, rect), &[]).unwrap();
         for film in [Vec2::new(0.0, 0.0), Vec2::new(15.0, 20.0), Vec2::new(30.0, 7.0)] {
-            let (a, b) = (t.camera.ray(film), s.camera.ray(film));
+            let (a, b) = (t.camera().ray(film), s.camera().ray(film));
             assert!((a.origin - b.origin).abs().max_element() < 1e-5, "{to_world}");
             assert!((a.direction - b.direction).abs().max_element() < 1e-5, "{to_world}");
         }
@@ -253,14 +253,14 @@ const REFS: &str = r#"<scene version="3.0.0">
 #[test]
 fn defaults_overrides_and_refs() {
     let s = xml("refs.xml", REFS, &[]).unwrap();
-    assert_eq!(s.media.len(), 1, "a medium referenced three times is one medium");
-    assert_eq!(s.camera_medium, Some(0));
-    assert!(s.surfaces.iter().all(|f| f.exterior == Some(0) && f.interior.is_none()));
-    assert_eq!(s.settings.max_depth, Some(8));
-    assert_eq!(s.camera.resolution, [768, 576], "Mitsuba's default film");
-    assert_eq!(s.settings.spp, 4, "Mitsuba's default sampler");
+    assert_eq!(s.media().len(), 1, "a medium referenced three times is one medium");
+    assert_eq!(s.camera_medium(), Some(0));
+    assert!(s.surfaces().iter().all(|f| f.exterior == Some(0) && f.interior.is_none()));
+    assert_eq!(s.settings().max_depth, Some(8));
+    assert_eq!(s.camera().resolution, [768, 576], "Mitsuba's default film");
+    assert_eq!(s.settings().spp, 4, "Mitsuba's default sampler");
     assert!((s.bounds().min.x + 0.5).abs() < 1e-6);
-    let sigma = s.media[0].majorant().to_array();
+    let sigma = s.media()[0].majorant().to_array();
     assert!((sigma[0] - 0.4).abs() < 1e-6 && (sigma[2] - 0.6).abs() < 1e-6, "{sigma:?}");
     // -D overrides a default; an undeclared key is allowed, as in Mitsuba.
     let s = xml("refs.xml", REFS, &[("r", "2"), ("unused", "1")]).unwrap();
@@ -289,7 +289,7 @@ fn includes_and_cyclic_includes() {
                 <include filename=\"parts/shapes.xml\"/>\n</scene>\n";
     std::fs::write(dir.join("main.xml"), main).unwrap();
     let s = zerovar::scene::load(&dir.join("main.xml"), &[]).unwrap_or_else(|e| panic!("{e}"));
-    assert_eq!(s.shapes.len(), 2);
+    assert_eq!(s.shapes().len(), 2);
     assert_eq!(s.bounds().max.x, 2.0);
 
     let a = "<scene version=\"3.0.0\">\n  <include filename=\"b.xml\"/>\n</scene>\n";
@@ -562,7 +562,7 @@ fn mitsuba_syntax_details() {
     let path = dir.join("syntax.xml");
     std::fs::write(&path, text).unwrap();
     let s = zerovar::scene::load(&path, &[]).unwrap_or_else(|e| panic!("{e}"));
-    assert!(matches!(s.surfaces[0].bsdf, zerovar::bsdf::Bsdf::Null));
+    assert!(matches!(s.surfaces()[0].bsdf, zerovar::bsdf::Bsdf::Null));
     let b = s.bounds();
     // The sphere spans [-0.25, 0.75] on every axis, the rotated triangle x in [-1, 0].
     assert!((b.min - Vec3A::new(-1.0, -0.25, -3.0)).abs().max_element() < 1e-6, "{b:?}");
@@ -572,7 +572,7 @@ fn mitsuba_syntax_details() {
          resolution = [768, 576]\n",
     );
     for film in [Vec2::new(0.0, 0.0), Vec2::new(700.0, 100.0)] {
-        let (a, b) = (t.camera.ray(film), s.camera.ray(film));
+        let (a, b) = (t.camera().ray(film), s.camera().ray(film));
         assert!((a.direction - b.direction).abs().max_element() < 1e-6);
     }
 }
@@ -630,7 +630,7 @@ fn emitting_shape_without_bsdf_is_black_as_in_mitsuba() {
         reflectance: Texture::Constant(Spectrum::splat(r)),
         two_sided: false,
     };
-    assert!(s.surfaces[0].bsdf == diffuse(0.0), "{:?}", s.surfaces[0].bsdf);
-    assert!(s.surfaces[1].bsdf == diffuse(0.5), "{:?}", s.surfaces[1].bsdf);
-    assert!(s.surfaces[2].bsdf == diffuse(0.3), "{:?}", s.surfaces[2].bsdf);
+    assert!(s.surfaces()[0].bsdf == diffuse(0.0), "{:?}", s.surfaces()[0].bsdf);
+    assert!(s.surfaces()[1].bsdf == diffuse(0.5), "{:?}", s.surfaces()[1].bsdf);
+    assert!(s.surfaces()[2].bsdf == diffuse(0.3), "{:?}", s.surfaces()[2].bsdf);
 }

@@ -9,10 +9,10 @@ use std::time::Duration;
 use zerovar::guided::Components;
 use zerovar::guided::TrainedField;
 use zerovar::output::{ImageMetadata, write_exr, write_png};
-use zerovar::render::parse_guiding;
 use zerovar::render::{
     Budget, GuidingOptions, RenderOptions, TrainBudget, render, render_with_field,
 };
+use zerovar::render::{MAX_TRAIN_PASSES, parse_guiding};
 use zerovar::stats::{RenderStats, TrainingStats};
 
 #[derive(Parser)]
@@ -251,8 +251,8 @@ fn run_reference(a: ReferenceArgs) -> Result<()> {
     }
     let defines = parse_defines(&a.scene.define)?;
     let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
-    let budget = validate_budget(&a.budget, scene.settings.spp * 16)?;
-    let seed = a.seed.unwrap_or(scene.settings.seed.wrapping_add(1_000_003));
+    let budget = validate_budget(&a.budget, scene.settings().spp * 16)?;
+    let seed = a.seed.unwrap_or(scene.settings().seed.wrapping_add(1_000_003));
     let options = RenderOptions { threads: a.threads, ..RenderOptions::unguided(budget, seed) };
     let bar = progress_bar(!a.quiet && std::io::stderr().is_terminal());
     let result = render(&scene, &options, &|done, total| {
@@ -261,8 +261,8 @@ fn run_reference(a: ReferenceArgs) -> Result<()> {
         true
     })?;
     bar.finish_and_clear();
-    let [w, h] = scene.camera.resolution;
-    let error: Vec<[f32; 3]> = result.film.pixels.iter().map(|p| p.std_error()).collect();
+    let [w, h] = scene.camera().resolution;
+    let error: Vec<[f32; 3]> = result.film.pixels().iter().map(|p| p.std_error()).collect();
     let meta = ImageMetadata {
         spp: result.spp,
         seconds: result.seconds,
@@ -285,10 +285,10 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     }
     let defines = parse_defines(&a.scene.define)?;
     let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
-    let budget = validate_budget(&a.budget, scene.settings.spp)?;
+    let budget = validate_budget(&a.budget, scene.settings().spp)?;
     let base = RenderOptions {
         threads: a.threads,
-        ..RenderOptions::unguided(budget, a.seed.unwrap_or(scene.settings.seed))
+        ..RenderOptions::unguided(budget, a.seed.unwrap_or(scene.settings().seed))
     };
     let methods = if a.method.is_empty() {
         Method::defaults(&base)
@@ -300,7 +300,7 @@ fn run_compare(a: CompareArgs) -> Result<()> {
         bail!("--method {}: two methods have this name", m.name);
     }
     let (rw, rh, reference) = zerovar::output::read_exr(&a.reference)?;
-    let [w, h] = scene.camera.resolution;
+    let [w, h] = scene.camera().resolution;
     if (rw, rh) != (w as usize, h as usize) {
         bail!(
             "--reference {}: it is {rw}x{rh} but the scene renders {w}x{h}",
@@ -384,7 +384,7 @@ fn validate_guiding(a: &GuidingArgs, default_full: bool) -> Result<GuidingOption
             bail!("--train-time {t}: give a positive number of seconds")
         }
         Some(t) => TrainBudget::Time(Duration::from_secs_f64(t)),
-        None if a.train_passes == 0 || a.train_passes > 20 => {
+        None if a.train_passes == 0 || a.train_passes > MAX_TRAIN_PASSES => {
             bail!("--train-passes {}: give 1 to 20 passes (pass k renders 2^k spp)", a.train_passes)
         }
         None => TrainBudget::Passes(a.train_passes),
@@ -399,7 +399,7 @@ fn run_train(a: TrainArgs) -> Result<()> {
     }
     let defines = parse_defines(&a.scene.define)?;
     let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
-    let seed = a.seed.unwrap_or(scene.settings.seed);
+    let seed = a.seed.unwrap_or(scene.settings().seed);
     let options = RenderOptions { budget: Budget::Samples(1), seed, threads: a.threads, guiding };
     let bar = progress_bar(!a.quiet && std::io::stderr().is_terminal());
     let (field, report) = zerovar::render::train(&scene, &options, &|done, total| {
@@ -505,9 +505,9 @@ fn run_render(c: RenderCommand) -> Result<()> {
     let budget = match (c.time, c.spp) {
         (Some(t), _) => Budget::Time(t),
         (None, Some(n)) => Budget::Samples(n),
-        (None, None) => Budget::Samples(scene.settings.spp),
+        (None, None) => Budget::Samples(scene.settings().spp),
     };
-    let seed = c.seed.unwrap_or(scene.settings.seed);
+    let seed = c.seed.unwrap_or(scene.settings().seed);
     let options = RenderOptions { budget, seed, threads: c.threads, guiding: c.guiding };
     let bar = progress_bar(c.progress);
     let report = |done, total| {
@@ -527,7 +527,7 @@ fn run_render(c: RenderCommand) -> Result<()> {
     };
     bar.finish_and_clear();
 
-    let [w, h] = scene.camera.resolution;
+    let [w, h] = scene.camera().resolution;
     let image = &result.image;
     let meta = ImageMetadata {
         spp: result.spp,

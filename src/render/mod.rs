@@ -142,6 +142,57 @@ impl RenderOptions {
     pub fn unguided(budget: Budget, seed: u64) -> Self {
         Self { budget, seed, threads: None, guiding: GuidingOptions::default() }
     }
+
+    /// Checks every setting; [`render`], [`render_with_field`] and [`train`] call it before
+    /// any work, so options assembled in code meet the same rules as the CLI's.
+    pub fn validate(&self) -> Result<(), OptionsError> {
+        match self.budget {
+            Budget::Samples(0) => return Err(OptionsError::ZeroSamples),
+            Budget::Time(t) if t.is_zero() => return Err(OptionsError::ZeroTime),
+            _ => {}
+        }
+        if self.threads == Some(0) {
+            return Err(OptionsError::ZeroThreads);
+        }
+        let g = &self.guiding;
+        if !(0.0..=1.0).contains(&g.alpha) {
+            return Err(OptionsError::Alpha(g.alpha));
+        }
+        match g.train {
+            TrainBudget::Passes(n) if n == 0 || n > MAX_TRAIN_PASSES => {
+                Err(OptionsError::TrainPasses(n))
+            }
+            TrainBudget::Time(t) if t.is_zero() => Err(OptionsError::ZeroTrainTime),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The most training passes [`TrainBudget::Passes`] takes: pass k renders 2^k spp, so 20
+/// passes are already a million samples per pixel.
+pub const MAX_TRAIN_PASSES: u32 = 20;
+
+/// Why [`RenderOptions::validate`] refused the options.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum OptionsError {
+    /// A sample budget of zero.
+    #[error("a budget of 0 samples per pixel: give at least one")]
+    ZeroSamples,
+    /// A time budget of zero.
+    #[error("a time budget of zero: give a positive duration")]
+    ZeroTime,
+    /// Zero worker threads.
+    #[error("0 threads: give at least one, or `None` for every core")]
+    ZeroThreads,
+    /// The guided strategy's probability is outside [0, 1] (or NaN).
+    #[error("alpha {0}: give a probability in [0, 1]")]
+    Alpha(f32),
+    /// A number of training passes outside 1..=[`MAX_TRAIN_PASSES`].
+    #[error("{0} training passes: give 1 to 20 (pass k renders 2^k spp)")]
+    TrainPasses(u32),
+    /// A training time of zero.
+    #[error("a training time of zero: give a positive duration")]
+    ZeroTrainTime,
 }
 
 /// What training produced.
@@ -197,6 +248,9 @@ pub enum RenderError {
     /// The progress callback cancelled the render during training.
     #[error("cancelled during training")]
     Cancelled,
+    /// The options broke a rule (see [`RenderOptions::validate`]).
+    #[error("render options: {0}")]
+    Options(#[from] OptionsError),
     /// The guiding field rejected its settings or its training samples.
     #[error("guiding: {0}")]
     Guiding(#[from] GuidingError),
@@ -209,6 +263,7 @@ pub fn render(
     options: &RenderOptions,
     progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
+    options.validate()?;
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
         if !options.guiding.components.any() {
@@ -232,6 +287,7 @@ pub fn render_with_field(
     trained: &TrainedField,
     progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
+    options.validate()?;
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
         let guidance = Guidance {
@@ -250,6 +306,7 @@ pub fn train(
     options: &RenderOptions,
     progress: &Progress<'_>,
 ) -> Result<(TrainedField, TrainingReport), RenderError> {
+    options.validate()?;
     in_pool(options, |_| {
         let progress = &Monitor::new(progress);
         let (field, direct, _, report) = train_in_pool(scene, options, progress)?;
@@ -524,8 +581,8 @@ fn final_phase(
 /// Mean per-pixel variance of a film's pixel means (luminance), the weight's inverse.
 fn image_variance(film: &Film) -> f64 {
     let total: f64 =
-        film.pixels.iter().map(|p| p.luminance_variance() / f64::from(p.count.max(1))).sum();
-    total / film.pixels.len().max(1) as f64
+        film.pixels().iter().map(|p| p.luminance_variance() / f64::from(p.count.max(1))).sum();
+    total / film.pixels().len().max(1) as f64
 }
 
 /// The images of `training` and `last` averaged with weights inversely proportional to their

@@ -25,7 +25,7 @@
 //!     .shape(sphere)
 //!     .light(LightDesc::point(Vec3::new(1.5, 3.0, 1.5), Rgb::Grey(30.0)))
 //!     .build()?;
-//! assert_eq!(scene.media.len(), 1);
+//! assert_eq!(scene.media().len(), 1);
 //! # Ok::<(), zerovar::scene::SceneError>(())
 //! ```
 

@@ -162,29 +162,29 @@ pub struct RenderSettings {
 #[derive(Debug)]
 pub struct Scene {
     /// The file it came from.
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// Shape geometry in world space.
-    pub shapes: Vec<Geometry>,
+    pub(crate) shapes: Vec<Geometry>,
     /// Per-shape surface properties (same indices as `shapes`).
-    pub surfaces: Vec<Surface>,
+    pub(crate) surfaces: Vec<Surface>,
     /// Acceleration structure over all shapes.
-    pub bvh: Bvh,
+    pub(crate) bvh: Bvh,
     /// Media.
-    pub media: Vec<Medium>,
+    pub(crate) media: Vec<Medium>,
     /// The tracker of each medium.
-    pub trackers: Vec<Tracker>,
+    pub(crate) trackers: Vec<Tracker>,
     /// All lights, area lights included.
-    pub lights: Vec<Light>,
+    pub(crate) lights: Vec<Light>,
     /// Indices of lights at infinity.
-    pub infinite_lights: Vec<u32>,
+    pub(crate) infinite_lights: Vec<u32>,
     /// The camera.
-    pub camera: Camera,
+    pub(crate) camera: Camera,
     /// The medium around the camera.
-    pub camera_medium: Option<u32>,
+    pub(crate) camera_medium: Option<u32>,
     /// The medium filling otherwise unassigned space.
-    pub global_medium: Option<u32>,
+    pub(crate) global_medium: Option<u32>,
     /// Integrator settings.
-    pub settings: RenderSettings,
+    pub(crate) settings: RenderSettings,
 }
 
 /// Loads, validates and compiles a scene file: TOML, or a Mitsuba 3 scene if the name ends in
@@ -215,6 +215,55 @@ pub fn load_str(
 }
 
 impl Scene {
+    /// The file the scene came from (empty for a scene built in code).
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The camera.
+    pub fn camera(&self) -> &Camera {
+        &self.camera
+    }
+
+    /// The medium around the camera, as an index into [`Scene::media`].
+    pub fn camera_medium(&self) -> Option<u32> {
+        self.camera_medium
+    }
+
+    /// The medium filling otherwise unassigned space, as an index into [`Scene::media`].
+    pub fn global_medium(&self) -> Option<u32> {
+        self.global_medium
+    }
+
+    /// The media, in the order the scene names them.
+    pub fn media(&self) -> &[Medium] {
+        &self.media
+    }
+
+    /// The free-flight estimator of each medium (same indices as [`Scene::media`]).
+    pub fn trackers(&self) -> &[Tracker] {
+        &self.trackers
+    }
+
+    /// Every light, area lights included.
+    pub fn lights(&self) -> &[Light] {
+        &self.lights
+    }
+
+    /// Shape geometry in world space.
+    pub fn shapes(&self) -> &[Geometry] {
+        &self.shapes
+    }
+
+    /// Each shape's surface (same indices as [`Scene::shapes`]).
+    pub fn surfaces(&self) -> &[Surface] {
+        &self.surfaces
+    }
+
+    /// The integrator settings and the defaults of a render.
+    pub fn settings(&self) -> &RenderSettings {
+        &self.settings
+    }
     /// Replaces the medium named `name` (keeping the name), for media built in code such as a
     /// `DensityField::Custom`; every medium's tracker is chosen again automatically.
     pub fn replace_medium(&mut self, name: &str, mut medium: Medium) -> Result<(), SceneError> {
