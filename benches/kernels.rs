@@ -38,7 +38,7 @@ fn trained(scene: &Scene) -> TrainedField {
 
 /// A camera ray through a random point of the film.
 fn camera_ray(scene: &Scene, s: &mut Sampler) -> Ray {
-    let [w, h] = scene.camera().resolution.map(|r| r as f32);
+    let [w, h] = scene.camera().resolution().map(|r| r as f32);
     scene.camera().ray(s.next_2d() * Vec2::new(w, h))
 }
 

@@ -26,7 +26,7 @@ fn load(path: &str, extra: Option<(&str, &str)>) -> Scene {
 /// `PATHS` camera paths over the whole film; returns the summed radiance.
 fn paths(scene: &Scene, first: u64, counters: &mut Counters) -> f32 {
     let integrator = VolPath::from_scene(scene);
-    let [w, h] = scene.camera().resolution.map(|r| r as f32);
+    let [w, h] = scene.camera().resolution().map(|r| r as f32);
     let mut sum = 0.0;
     for i in first..first + PATHS {
         let mut s = Sampler::new(1, 0, i);

@@ -95,7 +95,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("{}", scene.describe());
     println!("mean pixel {:?} after {:.2} s", result.film.average(), result.seconds);
     if let Some(out) = std::env::args().nth(1) {
-        let [w, h] = scene.camera().resolution;
+        let [w, h] = scene.camera().resolution();
         let meta = ImageMetadata {
             spp: result.spp,
             seconds: result.seconds,

@@ -63,7 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     options.guiding.adaptive = true;
     options.guiding.train = TrainBudget::Passes(4);
     let result = render(&scene, &options, &|_, _| true)?;
-    let [w, h] = scene.camera().resolution;
+    let [w, h] = scene.camera().resolution();
     write_png(&out, w, h, &result.image, 0.0)?;
     let tiles = result.selection.map_or(0, |s| s.guided_tiles);
     println!(

@@ -23,8 +23,7 @@ pub struct Camera {
     to_world: Transform,
     origin: Vec3A,
     tan_half: Vec2,
-    /// Image width and height in pixels.
-    pub resolution: [u32; 2],
+    resolution: [u32; 2],
 }
 
 impl Camera {
@@ -39,6 +38,11 @@ impl Camera {
         };
         let origin = to_world.point(Vec3A::ZERO);
         Self { to_world, origin, tan_half, resolution }
+    }
+
+    /// Image width and height in pixels.
+    pub fn resolution(&self) -> [u32; 2] {
+        self.resolution
     }
 
     /// The camera position.

@@ -176,7 +176,7 @@ pub fn run(
 ) -> Result<Vec<MethodResult>, CompareError> {
     // Size and trim are checked before any rendering.
     measure(reference, reference, trim)?;
-    let pixels = (scene.camera.resolution[0] * scene.camera.resolution[1]) as usize;
+    let pixels = (scene.camera.resolution()[0] * scene.camera.resolution()[1]) as usize;
     if pixels != reference.len() {
         return Err(MetricsError::SizeMismatch { image: pixels, reference: reference.len() }.into());
     }

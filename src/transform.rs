@@ -9,9 +9,9 @@ use glam::{Affine3A, Mat3, Mat4, Vec3, Vec3A};
 #[derive(Clone, Copy, Debug)]
 pub struct Transform {
     /// Object to world.
-    pub m: Affine3A,
+    pub(crate) m: Affine3A,
     /// World to object.
-    pub inv: Affine3A,
+    pub(crate) inv: Affine3A,
 }
 
 impl Default for Transform {
@@ -31,6 +31,11 @@ impl Transform {
             return None;
         }
         Some(Self { m, inv: m.inverse() })
+    }
+
+    /// The object-to-world map (its inverse is kept in step, so it is read-only).
+    pub fn matrix(&self) -> Affine3A {
+        self.m
     }
 
     /// A translation.

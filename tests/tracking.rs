@@ -500,7 +500,7 @@ fn history_aware_spectral_tracking_keeps_the_channel_average_of_the_weight() {
 
 /// Per block of a 4x4 split of the image, per channel: the estimate of the block's mean.
 fn blocks(scene: &Scene, seed: u64, n: u64) -> Vec<[MeanEstimate; 3]> {
-    let [w, h] = scene.camera().resolution.map(|r| r as f32);
+    let [w, h] = scene.camera().resolution().map(|r| r as f32);
     let mut out = Vec::new();
     for by in 0..4 {
         for bx in 0..4 {

@@ -257,7 +257,7 @@ fn defaults_overrides_and_refs() {
     assert_eq!(s.camera_medium(), Some(0));
     assert!(s.surfaces().iter().all(|f| f.exterior == Some(0) && f.interior.is_none()));
     assert_eq!(s.settings().max_depth, Some(8));
-    assert_eq!(s.camera().resolution, [768, 576], "Mitsuba's default film");
+    assert_eq!(s.camera().resolution(), [768, 576], "Mitsuba's default film");
     assert_eq!(s.settings().spp, 4, "Mitsuba's default sampler");
     assert!((s.bounds().min.x + 0.5).abs() < 1e-6);
     let sigma = s.media()[0].majorant().to_array();

@@ -261,7 +261,7 @@ fn run_reference(a: ReferenceArgs) -> Result<()> {
         true
     })?;
     bar.finish_and_clear();
-    let [w, h] = scene.camera().resolution;
+    let [w, h] = scene.camera().resolution();
     let error: Vec<[f32; 3]> = result.film.pixels().iter().map(|p| p.std_error()).collect();
     let meta = ImageMetadata {
         spp: result.spp,
@@ -300,7 +300,7 @@ fn run_compare(a: CompareArgs) -> Result<()> {
         bail!("--method {}: two methods have this name", m.name);
     }
     let (rw, rh, reference) = zerovar::output::read_exr(&a.reference)?;
-    let [w, h] = scene.camera().resolution;
+    let [w, h] = scene.camera().resolution();
     if (rw, rh) != (w as usize, h as usize) {
         bail!(
             "--reference {}: it is {rw}x{rh} but the scene renders {w}x{h}",
@@ -527,7 +527,7 @@ fn run_render(c: RenderCommand) -> Result<()> {
     };
     bar.finish_and_clear();
 
-    let [w, h] = scene.camera().resolution;
+    let [w, h] = scene.camera().resolution();
     let image = &result.image;
     let meta = ImageMetadata {
         spp: result.spp,

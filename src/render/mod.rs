@@ -349,7 +349,7 @@ fn train_in_pool(
     let start = Instant::now();
     let mut field = Field::new(options.guiding.field.clone())?;
     let settings = walk_settings(scene, options);
-    let [w, h] = scene.camera.resolution;
+    let [w, h] = scene.camera.resolution();
     let mut films = Vec::new();
     let mut direct = DirectFluence::default();
     let (mut spp, mut samples_total) = (0u32, 0u64);
@@ -510,7 +510,7 @@ fn final_phase(
         record: false,
         guided_tiles: guidance.as_ref().and_then(|g| g.guided_tiles.as_deref()),
     };
-    let [w, h] = scene.camera.resolution;
+    let [w, h] = scene.camera.resolution();
     let mut film = Film::new(w, h);
     let mut counters = Counters::default();
     let start = Instant::now();
@@ -657,7 +657,7 @@ fn render_pass(
     monitor: &Monitor<'_>,
     on_tile: &(dyn Fn(u64) + Sync),
 ) -> Option<PassOutput> {
-    let [w, h] = scene.camera.resolution;
+    let [w, h] = scene.camera.resolution();
     let tiles = tiles(w, h);
     let unguided = WalkSettings { guide: Components::OFF, ..*pass.settings };
     type TileResult = ((Vec<PixelSum>, Counters, Vec<Sample>), Vec<(Vec3A, f32)>);
@@ -711,7 +711,7 @@ fn render_tile<C: RadianceCache>(
     cache: &mut C,
 ) -> (Vec<PixelSum>, Counters, Vec<Sample>) {
     let Pass { seed, first, count, estimate, record, .. } = *pass;
-    let [w, h] = scene.camera.resolution;
+    let [w, h] = scene.camera.resolution();
     let mut counters = Counters::default();
     let mut recorder = PathRecorder::new();
     let mut samples = Vec::new();

@@ -73,7 +73,7 @@ pub(super) fn pilot(
     monitor: &Monitor<'_>,
 ) -> Option<(Vec<bool>, Selection)> {
     let start = Instant::now();
-    let [w, h] = scene.camera.resolution;
+    let [w, h] = scene.camera.resolution();
     // A quarter of the last training pass, but never more than a quarter of a sample budget
     // (and at least two samples, the fewest that give a variance).
     let mut count = (last_pass / 4).clamp(2, 16);

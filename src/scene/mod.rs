@@ -312,7 +312,7 @@ impl Scene {
         let b = self.bounds();
         let triangles: usize = self.shapes.iter().map(Geometry::primitive_count).sum();
         let _ = writeln!(s, "scene    {}", self.path.display());
-        let [w, h] = self.camera.resolution;
+        let [w, h] = self.camera.resolution();
         let _ = writeln!(s, "camera   {w}x{h}, in medium {}", self.medium_name(self.camera_medium));
         let _ = writeln!(s, "shapes   {} ({} primitives)", self.shapes.len(), triangles);
         if !b.is_empty() {
