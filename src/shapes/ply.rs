@@ -159,6 +159,8 @@ pub(super) fn read(data: &[u8]) -> Result<PlyMesh, PlyError> {
                 faces(&mut body, e, &mut mesh)?;
                 faces_read = true;
             }
+            // An element without properties takes no bytes, however large its count.
+            _ if e.properties.is_empty() => {}
             _ => {
                 for _ in 0..e.count {
                     for p in &e.properties {
@@ -583,6 +585,9 @@ mod tests {
             let e = read(text.as_bytes()).unwrap_err().to_string();
             assert!(e.contains(expected), "{e:?} lacks {expected:?}");
         }
+        // A huge element without properties is nothing to read, not a long loop.
+        let empty = ASCII.replace("end_header", "element nothing 18446744073709551615\nend_header");
+        assert_eq!(read(empty.as_bytes()).unwrap().triangles.len(), 3);
         let mut truncated = binary(false);
         truncated.truncate(truncated.len() - 3);
         let e = read(&truncated).unwrap_err().to_string();
