@@ -228,3 +228,18 @@ fn mitsuba_f_camera_in_fog_disk() {
 fn mitsuba_g_envmap_sphere() {
     validate("g-envmap-sphere", 1024);
 }
+
+#[test]
+fn mitsuba_h_media_in_obj_and_ply_meshes() {
+    validate("h-mesh-media", 4096);
+}
+
+#[test]
+fn mitsuba_i_thin_dielectric_pane() {
+    validate("i-thin-pane", 1024);
+}
+
+#[test]
+fn mitsuba_j_envmap_bilinear_seen_directly() {
+    validate("j-envmap-bilinear", 1024);
+}

@@ -323,7 +323,7 @@ fn bad_input_names_the_place_and_the_fix() {
             "type=\"sphere\"",
             "type=\"teapot\"",
             "plugin.xml:5:5",
-            &["unknown shape `teapot`", "sphere, cube, rectangle, disk or obj"],
+            &["unknown shape `teapot`", "sphere, cube, rectangle, disk, obj or ply"],
         ),
         (
             "type",
@@ -369,11 +369,18 @@ fn bad_input_names_the_place_and_the_fix() {
             &["<ref id=\"glass\"> names no object defined before it"],
         ),
         (
+            "rough",
+            radius,
+            "<bsdf type=\"roughdielectric\"/>",
+            "rough.xml:6:9",
+            &["unsupported bsdf `roughdielectric`", "thindielectric"],
+        ),
+        (
             "thin",
             radius,
-            "<bsdf type=\"thindielectric\"/>",
-            "thin.xml:6:9",
-            &["no thin dielectric (`thindielectric`)"],
+            "<bsdf type=\"thindielectric\"><string name=\"int_ior\" value=\"bk7\"/></bsdf>",
+            "thin.xml:6:37",
+            &["`int_ior` must be a <float> (named materials"],
         ),
         (
             "include",
@@ -382,7 +389,14 @@ fn bad_input_names_the_place_and_the_fix() {
             "include.xml:5:5",
             &["<include filename=\"nothere.xml\">: cannot read", "nothere.xml"],
         ),
-        ("ply", "type=\"sphere\"", "type=\"ply\"", "ply.xml:5:5", &["not supported yet", "OBJ"]),
+        (
+            "serialized",
+            "type=\"sphere\"",
+            "type=\"serialized\"",
+            "serialized.xml:5:5",
+            &["serialized meshes are not supported", "type=\"ply\""],
+        ),
+        ("ply", "type=\"sphere\"", "type=\"ply\"", "ply.xml:5:5", &["give the mesh as <string"]),
         (
             "pathint",
             radius,
@@ -633,4 +647,107 @@ fn emitting_shape_without_bsdf_is_black_as_in_mitsuba() {
     assert!(s.surfaces()[0].bsdf == diffuse(0.0), "{:?}", s.surfaces()[0].bsdf);
     assert!(s.surfaces()[1].bsdf == diffuse(0.5), "{:?}", s.surfaces()[1].bsdf);
     assert!(s.surfaces()[2].bsdf == diffuse(0.3), "{:?}", s.surfaces()[2].bsdf);
+}
+
+#[test]
+fn ply_meshes_render_as_their_obj_twins_and_bad_ones_say_where() {
+    // One quad (fan-triangulated) with vertex normals, as OBJ, ASCII PLY and big-endian PLY.
+    write(
+        "quad.obj",
+        "v -1 -1 0\nv 1 -1 0\nv 1 1 0.5\nv -1 1 0\nvn 0 0 1\nvn 0 0.3 1\nvn 0 0 1\nvn 0.2 0 1\n\
+         f 1//1 2//2 3//3 4//4\n",
+    );
+    let ascii = "ply\nformat ascii 1.0\nelement vertex 4\nproperty float x\nproperty float y\n\
+        property float z\nproperty float nx\nproperty float ny\nproperty float nz\n\
+        element face 1\nproperty list uchar int vertex_indices\nend_header\n\
+        -1 -1 0 0 0 1\n1 -1 0 0 0.3 1\n1 1 0.5 0 0 1\n-1 1 0 0.2 0 1\n4 0 1 2 3\n";
+    write("quad.ply", ascii);
+    let mut big = b"ply\nformat binary_big_endian 1.0\nelement vertex 4\nproperty double x\n\
+        property double y\nproperty double z\nproperty double nx\nproperty double ny\n\
+        property double nz\nelement face 1\nproperty list uint short vertex_index\nend_header\n"
+        .to_vec();
+    for line in ascii.lines().skip(12).take(4) {
+        for v in line.split(' ') {
+            big.extend(v.parse::<f64>().unwrap().to_be_bytes());
+        }
+    }
+    big.extend(4u32.to_be_bytes());
+    for i in 0..4i16 {
+        big.extend(i.to_be_bytes());
+    }
+    write("quad-be.ply", &big);
+    let scene = |kind: &str, file: &str, extra: &str| {
+        with_camera(
+            r#"<lookat origin="0.5, 1, 4" target="0, 0, 0" up="0, 1, 0"/>"#,
+            &format!(
+                r#"<shape type="{kind}">
+                    <string name="filename" value="{file}"/>{extra}
+                    <transform name="to_world"><rotate x="1" angle="-20"/></transform>
+                </shape>
+                <emitter type="directional"><vector name="direction" value="0.3, -0.4, -1"/></emitter>
+                <emitter type="constant"><float name="radiance" value="0.2"/></emitter>"#
+            ),
+        )
+    };
+    let obj = xml("quad-obj.xml", &scene("obj", "quad.obj", ""), &[]).unwrap();
+    let reference = image(&obj, 3);
+    assert!(reference.iter().any(|p| p[0] > 0.0));
+    for file in ["quad.ply", "quad-be.ply"] {
+        let ply =
+            xml("quad-ply.xml", &scene("ply", file, ""), &[]).unwrap_or_else(|e| panic!("{e}"));
+        assert!(image(&ply, 3) == reference, "{file}: the PLY quad renders unlike the OBJ one");
+    }
+    // face_normals drops the vertex normals in both formats alike.
+    let flat = r#"<boolean name="face_normals" value="true"/>"#;
+    let a = xml("quad-obj-flat.xml", &scene("obj", "quad.obj", flat), &[]).unwrap();
+    let b = xml("quad-ply-flat.xml", &scene("ply", "quad.ply", flat), &[]).unwrap();
+    let flat_image = image(&a, 3);
+    assert!(image(&b, 3) == flat_image && flat_image != reference);
+
+    // The TOML format takes `type = "ply"` as it takes "obj".
+    let toml = |kind: &str, file: &str| {
+        format!(
+            "[camera]\norigin = [0.5, 1, 4]\ntarget = [0, 0, 0]\nfov = 40\nresolution = [12, 9]\n\
+             [[shapes]]\ntype = \"{kind}\"\nfilename = \"{}\"\n\
+             [[lights]]\ntype = \"constant\"\nradiance = 1\n",
+            temp_dir().join(file).display()
+        )
+    };
+    let a = crate::common::scene(&toml("obj", "quad.obj"));
+    let b = crate::common::scene(&toml("ply", "quad-be.ply"));
+    assert!(image(&a, 4) == image(&b, 4), "TOML: the PLY quad renders unlike the OBJ one");
+
+    // A broken file is an error naming the file and the place in it.
+    write("bad.ply", ascii.replace("4 0 1 2 3", "4 0 1 2 9"));
+    let e = xml("bad-ply.xml", &scene("ply", "bad.ply", ""), &[]).unwrap_err().to_string();
+    assert!(e.contains("bad.ply: PLY data at line 17: face 0 refers to vertex 9"), "{e}");
+    write("short.ply", &big[..big.len() - 5]);
+    let e = xml("short-ply.xml", &scene("ply", "short.ply", ""), &[]).unwrap_err().to_string();
+    assert!(e.contains("short.ply: PLY data at byte") && e.contains("truncated"), "{e}");
+}
+
+#[test]
+fn rotation_about_a_non_unit_axis_is_mitsubas_matrix() {
+    // Mitsuba 3.9.1 does not normalise a <rotate> axis: this cube's bounding box there is
+    // [-0.0526547, -0.152655, -0.979783] to [2.05265, 1.95265, 1.37978] (with the axis
+    // normalised it would be about 0.6 * 1.6 across, not 2.1).
+    let text = with_camera(
+        r#"<lookat origin="0, 1, 5" target="0, 0, 0" up="0, 1, 0"/>"#,
+        r#"<shape type="cube">
+            <transform name="to_world">
+                <scale value="0.6"/>
+                <rotate x="1" y="1" angle="35"/>
+                <translate value="1, 0.9, 0.2"/>
+            </transform>
+        </shape>"#,
+    );
+    let b = xml("rotate-axis.xml", &text, &[]).unwrap_or_else(|e| panic!("{e}")).bounds();
+    let (min, max) = (
+        Vec3A::new(-0.052_654_7, -0.152_655, -0.979_783),
+        Vec3A::new(2.052_65, 1.952_65, 1.379_78),
+    );
+    assert!(
+        (b.min - min).abs().max_element() < 1e-5 && (b.max - max).abs().max_element() < 1e-5,
+        "{b:?}"
+    );
 }

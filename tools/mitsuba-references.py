@@ -13,6 +13,9 @@ over sqrt(K)) as channels stderr.R, stderr.G, stderr.B, 32-bit float. tests/mits
 each scene with zerovar and compares the two per pixel by z-scores.
 
 Usage: python3 tools/mitsuba-references.py [scene.xml ...]   (default: every validation scene)
+
+ZEROVAR_REF_RUNS and ZEROVAR_REF_SPP override K and SPP (for a quicker reference: K of at least
+16 keeps the standard error's own error near 18%, which the z statistics tolerate).
 """
 
 import glob
@@ -24,8 +27,11 @@ import numpy as np
 import mitsuba as mi
 
 VARIANT = "scalar_rgb"
-RUNS = 32  # K independent renders: the standard error's own error is about 1/sqrt(2(K-1)) = 13%
-SPP = 1024  # samples per pixel of each render
+# K independent renders: the standard error's own error is about 1/sqrt(2(K-1)) = 13%
+RUNS = int(os.environ.get("ZEROVAR_REF_RUNS", 32))
+SPP = int(os.environ.get("ZEROVAR_REF_SPP", 1024))  # samples per pixel of each render
+if RUNS < 16 or SPP < 1:
+    sys.exit("ZEROVAR_REF_RUNS must be at least 16 and ZEROVAR_REF_SPP at least 1")
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 DATA = os.path.join(HERE, "..", "tests", "data", "mitsuba")

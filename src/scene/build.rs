@@ -272,18 +272,23 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
                 _ => Geometry::Disk(Disk::new(to_world)),
             })
         }
-        "obj" => {
-            cx.only("obj meshes", &not_sphere)?;
+        "obj" | "ply" => {
+            cx.only(&format!("{} meshes", d.kind), &not_sphere)?;
             let file = cx.file(&cx.required("filename", &d.filename)?);
             if !file.is_file() {
                 return cx.err(format!("{}: no such file", file.display()));
             }
-            Mesh::from_obj(&file, &to_world, d.face_normals.unwrap_or(false))
-                .map(Geometry::Mesh)
-                .or_else(|e| cx.err(format!("{}: {e}", file.display())))
+            let face_normals = d.face_normals.unwrap_or(false);
+            let mesh = if d.kind == "obj" {
+                Mesh::from_obj(&file, &to_world, face_normals)
+            } else {
+                Mesh::from_ply(&file, &to_world, face_normals)
+            };
+            mesh.map(Geometry::Mesh).or_else(|e| cx.err(format!("{}: {e}", file.display())))
         }
-        other => cx
-            .err(format!("unknown shape type `{other}`; use sphere, cube, rectangle, disk or obj")),
+        other => cx.err(format!(
+            "unknown shape type `{other}`; use sphere, cube, rectangle, disk, obj or ply"
+        )),
     }
 }
 
@@ -332,16 +337,23 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
             };
             Ok(Bsdf::Diffuse { reflectance, two_sided: d.two_sided.unwrap_or(false) })
         }
-        "dielectric" => {
-            cx.only("dielectrics", &diffuse_only)?;
+        "dielectric" | "thindielectric" => {
+            cx.only(&format!("{} surfaces", d.kind), &diffuse_only)?;
             // Mitsuba's defaults: BK7 glass inside, air outside.
             let (int, ext) = (d.int_ior.unwrap_or(1.5046), d.ext_ior.unwrap_or(1.000277));
             if !(int > 0.0 && ext > 0.0 && int.is_finite() && ext.is_finite()) {
                 return cx.err("indices of refraction must be positive");
             }
-            Ok(Bsdf::Dielectric { eta: int / ext })
+            let eta = int / ext;
+            Ok(if d.kind == "dielectric" {
+                Bsdf::Dielectric { eta }
+            } else {
+                Bsdf::ThinDielectric { eta }
+            })
         }
-        other => cx.err(format!("unknown bsdf type `{other}`; use null, diffuse or dielectric")),
+        other => cx.err(format!(
+            "unknown bsdf type `{other}`; use null, diffuse, dielectric or thindielectric"
+        )),
     }
 }
 

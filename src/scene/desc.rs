@@ -134,16 +134,16 @@ pub enum TransformStep {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BsdfDesc {
-    /// "null", "diffuse" or "dielectric".
+    /// "null", "diffuse", "dielectric" or "thindielectric".
     #[serde(rename = "type")]
     pub kind: String,
     /// Diffuse: reflectance (a colour or a checkerboard table).
     pub reflectance: Option<TextureDesc>,
     /// Diffuse: reflect on both sides.
     pub two_sided: Option<bool>,
-    /// Dielectric: interior index of refraction.
+    /// Dielectric, thindielectric: interior (slab) index of refraction.
     pub int_ior: Option<f32>,
-    /// Dielectric: exterior index of refraction.
+    /// Dielectric, thindielectric: exterior index of refraction.
     pub ext_ior: Option<f32>,
 }
 
@@ -184,16 +184,16 @@ pub struct EmitterDesc {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShapeDesc {
-    /// "sphere", "cube", "rectangle", "disk" or "obj".
+    /// "sphere", "cube", "rectangle", "disk", "obj" or "ply".
     #[serde(rename = "type")]
     pub kind: String,
     /// Sphere: centre (default origin).
     pub center: Option<Vec3>,
     /// Sphere: radius (default 1).
     pub radius: Option<f32>,
-    /// Obj: the file, relative to the scene file.
+    /// Obj, ply: the file, relative to the scene file.
     pub filename: Option<String>,
-    /// Obj: ignore the file's vertex normals.
+    /// Obj, ply: ignore the file's vertex normals.
     pub face_normals: Option<bool>,
     /// Transform steps applied in order.
     #[serde(default)]

@@ -1,4 +1,4 @@
-//! Triangle meshes: from OBJ files, and the rectangle and cube of Mitsuba built as meshes.
+//! Triangle meshes: from OBJ and PLY files, and the rectangle and cube of Mitsuba built as meshes.
 //! Vertices are transformed to world space when the scene is built.
 
 use super::PrimHit;
@@ -14,6 +14,12 @@ pub enum MeshError {
     /// The OBJ reader failed.
     #[error("cannot read OBJ: {0}")]
     Obj(String),
+    /// The PLY reader failed.
+    #[error(transparent)]
+    Ply(#[from] super::ply::PlyError),
+    /// The file could not be read at all.
+    #[error("cannot read the file: {0}")]
+    Io(#[from] std::io::Error),
     /// The file holds no triangle.
     #[error("the mesh has no triangles")]
     Empty,
@@ -112,6 +118,27 @@ impl Mesh {
             indices,
             to_world,
         )
+    }
+
+    /// Reads a PLY file (ASCII or binary; polygons fan-triangulated). Vertex normals are used
+    /// unless `face_normals`, as for OBJ.
+    pub fn from_ply(
+        path: &Path,
+        to_world: &Transform,
+        face_normals: bool,
+    ) -> Result<Self, MeshError> {
+        Self::from_ply_bytes(&std::fs::read(path)?, to_world, face_normals)
+    }
+
+    /// `from_ply` on the file's bytes.
+    pub fn from_ply_bytes(
+        data: &[u8],
+        to_world: &Transform,
+        face_normals: bool,
+    ) -> Result<Self, MeshError> {
+        let ply = super::ply::read(data)?;
+        let normals = ply.normals.filter(|_| !face_normals);
+        Self::new(ply.positions, normals, ply.uvs, ply.triangles, to_world)
     }
 
     /// Mitsuba's `rectangle`: [-1, 1]^2 in the z = 0 plane, facing +z.

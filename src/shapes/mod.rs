@@ -7,10 +7,12 @@
 
 mod disk;
 mod mesh;
+mod ply;
 mod sphere;
 
 pub use disk::Disk;
 pub use mesh::{Mesh, MeshError};
+pub use ply::PlyError;
 pub use sphere::Sphere;
 
 use crate::math::{Aabb, Ray};

@@ -13,33 +13,35 @@ use glam::{Vec3, Vec3A};
 use std::rc::Rc;
 use toml::Spanned;
 
-const SHAPES: &str = "sphere, cube, rectangle, disk or obj";
-const BSDFS: &str = "null, diffuse, dielectric, or twosided around diffuse";
+const SHAPES: &str = "sphere, cube, rectangle, disk, obj or ply";
+const BSDFS: &str = "null, diffuse, dielectric, thindielectric, or twosided around diffuse";
 const EMITTERS: &str = "point, spot, directional, constant, envmap, and area inside a <shape>";
 
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
     let p = Props::new(o);
     match o.kind.as_str() {
-        "sphere" | "cube" | "rectangle" | "disk" | "obj" => {}
-        "ply" | "serialized" => {
-            return Err(p.err(format!(
-                "{} meshes are not supported yet; convert the mesh to OBJ and use <shape \
-                 type=\"obj\">",
-                o.kind
-            )));
+        "sphere" | "cube" | "rectangle" | "disk" | "obj" | "ply" => {}
+        "serialized" => {
+            return Err(p.err(
+                "serialized meshes are not supported; convert the mesh to PLY or OBJ and use \
+                 <shape type=\"ply\"> or <shape type=\"obj\">",
+            ));
         }
         other => return Err(p.err(format!("unknown shape `{other}`; use {SHAPES}"))),
     }
     let (center, radius) =
         if o.kind == "sphere" { (p.vector("center")?, p.float("radius")?) } else { (None, None) };
     let (mut filename, mut face_normals, mut flip_uv) = (None, None, true);
-    if o.kind == "obj" {
+    if o.kind == "obj" || o.kind == "ply" {
         let Some((name, prop)) = p.string("filename")? else {
             return Err(p.err("give the mesh as <string name=\"filename\" value=\"...\"/>"));
         };
         filename = Some(conv.file(name, prop)?);
         face_normals = p.boolean("face_normals")?;
-        flip_uv = p.boolean("flip_tex_coords")?.unwrap_or(true);
+        // Only Mitsuba's OBJ reader flips v (PLY has no such option).
+        if o.kind == "obj" {
+            flip_uv = p.boolean("flip_tex_coords")?.unwrap_or(true);
+        }
     }
     let transform = p.transform("to_world")?.unwrap_or(&[]).to_vec();
     let flip_normals = p.boolean("flip_normals")?.unwrap_or(false);
@@ -87,6 +89,12 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
     };
     let textured =
         bsdf.as_ref().is_some_and(|b| matches!(b.reflectance, Some(TextureDesc::Checkerboard(_))));
+    if o.kind == "ply" && textured {
+        return Err(p.err(
+            "textures on PLY meshes are not supported (their texture coordinates are not \
+             validated against Mitsuba); use an OBJ mesh or an untextured bsdf",
+        ));
+    }
     if o.kind == "obj" && flip_uv && textured {
         return Err(p.err(
             "zerovar reads OBJ texture coordinates unflipped while Mitsuba flips them by \
@@ -127,7 +135,7 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
                 },
             };
         }
-        "dielectric" => {
+        "dielectric" | "thindielectric" => {
             for (name, slot) in [("int_ior", &mut d.int_ior), ("ext_ior", &mut d.ext_ior)] {
                 *slot = match p.raw(name) {
                     None => None,
@@ -158,11 +166,6 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
                 )));
             }
             return Ok(BsdfDesc { two_sided: Some(true), ..bsdf(inner)? });
-        }
-        "thindielectric" => {
-            return Err(
-                p.err(format!("zerovar has no thin dielectric (`thindielectric`); use {BSDFS}"))
-            );
         }
         other => return Err(p.err(format!("unknown or unsupported bsdf `{other}`; use {BSDFS}"))),
     }

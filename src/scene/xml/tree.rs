@@ -440,7 +440,7 @@ impl Reader<'_> {
                     let angle = number(&angle).ok_or_else(|| {
                         pos.err(format!("<rotate angle=\"{angle}\">: the angle must be a number"))
                     })?;
-                    TransformStep::Rotate { axis, angle }
+                    mitsuba_rotation(axis, angle)
                 }
                 "matrix" => {
                     self.attributes(child, &pos, &["value"])?;
@@ -659,4 +659,29 @@ fn vec3(text: &str) -> Option<Vec3> {
         [x, y, z] => Some(Vec3::new(*x, *y, *z)),
         _ => None,
     }
+}
+
+/// Mitsuba 3 builds `<rotate>` from its axis as given, without normalising it (measured on
+/// 3.9.1: x="1" y="1" angle="35" scales and shears as well as rotating), so an axis that is
+/// not of unit length becomes the same matrix here, cos(a) I + sin(a) [axis]x +
+/// (1 - cos(a)) axis axis^T, and a unit axis stays an ordinary rotation.
+fn mitsuba_rotation(axis: Vec3, angle: f32) -> TransformStep {
+    let length = axis.as_dvec3().length();
+    if length == 0.0 || (length - 1.0).abs() < 1e-6 {
+        return TransformStep::Rotate { axis, angle };
+    }
+    let a = axis.as_dvec3();
+    let (sin, cos) = f64::from(angle).to_radians().sin_cos();
+    let m = glam::DMat3::from_diagonal(glam::DVec3::splat(cos))
+        + glam::DMat3::from_cols(
+            glam::DVec3::new(0.0, a.z, -a.y),
+            glam::DVec3::new(-a.z, 0.0, a.x),
+            glam::DVec3::new(a.y, -a.x, 0.0),
+        ) * sin
+        + glam::DMat3::from_cols(a * a.x, a * a.y, a * a.z) * (1.0 - cos);
+    let row = |r: usize| {
+        let r = m.row(r);
+        [r.x as f32, r.y as f32, r.z as f32, 0.0]
+    };
+    TransformStep::Matrix([row(0), row(1), row(2), [0.0, 0.0, 0.0, 1.0]])
 }
