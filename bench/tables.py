@@ -29,7 +29,7 @@ def load_mitsuba(out):
 def why_missing(out):
     log = out / "mitsuba.log"
     lines = [l for l in log.read_text().splitlines() if l.strip()] if log.is_file() else []
-    return lines[-1] if lines else "no result"
+    return lines[-1] if lines else "tools/mitsuba-bench.py left no log"
 
 
 def summary(results, out, scenes, mitsuba):
@@ -99,6 +99,8 @@ def scene_table(out, xml):
                 f"{m3['load_seconds']:.2f} s to load, {m3['first_pass_seconds']:.2f} s for the first "
                 f"pass (JIT included), {m3['passes']} passes. Mitsuba / this is Mitsuba's relMSE "
                 "over the row's (> 1: the row has the smaller error).")
+        if m3.get("notes"):
+            note += " Note: " + "; ".join(m3["notes"]) + "."
         g = m3.get("agreement")
         if g:
             q = ", ".join(f"{v:+.2f}" for v in g["quadrants"])
