@@ -1,9 +1,13 @@
 #!/usr/bin/env bash
-# The benchmark suite: guided against unguided at equal time on every scene of scenes/bench/.
+# The benchmark suite: guided against unguided at equal time on every scene of scenes/bench/,
+# and Mitsuba 3's volpath on the same scene (scenes/bench/<scene>.xml) at the same time.
 # Usage: bench/run.sh [SECONDS_PER_METHOD] [REFERENCE_SECONDS]   (defaults 20 and 120)
 # Writes bench/out/<scene>/ (tables, images), bench/RESULTS.md (a summary, every table, the
 # machine, the date) and bench/plots/ (each scene's convergence plot and image strip, which
-# RESULTS.md shows). References are kept between runs; delete bench/out to redo them.
+# RESULTS.md shows). References are kept between runs while the scene file is unchanged (its
+# SHA-256 is kept beside the reference); delete bench/out to redo them all.
+# The Mitsuba 3 column needs `import mitsuba` to work (pip install mitsuba); without it the
+# column is left out and RESULTS.md says why. tools/mitsuba-bench.py picks the variant.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 budget=${1:-20}
@@ -23,44 +27,58 @@ results=bench/RESULTS.md
 } > "$results"
 mkdir -p bench/plots
 details=$(mktemp)
+threads=$(nproc)
+if mitsuba_version=$(python3 -c 'import mitsuba; print(mitsuba.__version__)' 2>/dev/null); then
+  mitsuba=1
+  echo "- Mitsuba 3: ${mitsuba_version} (\`tools/mitsuba-bench.py\`, volpath, ${threads} threads, the same budget including scene load and JIT)" >> "$results"
+else
+  mitsuba=0
+  echo "- Mitsuba 3: skipped, \`python3 -c 'import mitsuba'\` failed (\`pip install mitsuba\` adds the Mitsuba column)" >> "$results"
+fi
 for scene in scenes/bench/*.toml; do
   name=$(basename "$scene" .toml)
   out=bench/out/$name
   mkdir -p "$out"
-  if [ ! -f "$out/reference.exr" ]; then
+  sum=$(sha256sum "$scene" | cut -d' ' -f1)
+  if [ ! -f "$out/reference.exr" ] || [ "$(cat "$out/reference.sha256" 2>/dev/null)" != "$sum" ]; then
     echo "$name: reference (${ref_time} s)" >&2
+    rm -f "$out/reference.sha256"
     $bin reference "$scene" -o "$out/reference.exr" --time "$ref_time" --quiet
+    echo "$sum" > "$out/reference.sha256"
   fi
   echo "$name: compare (${budget} s per method)" >&2
   $bin compare "$scene" --reference "$out/reference.exr" --time "$budget" --out "$out" --trim 0.0001 >/dev/null
   cp "$out/convergence.svg" "bench/plots/$name-convergence.svg"
   cp "$out/strip.png" "bench/plots/$name-strip.png"
+  rm -f "$out/mitsuba.json" "$out/mitsuba.log"
+  xml=scenes/bench/$name.xml
+  if [ "$mitsuba" = 1 ]; then
+    if [ -f "$xml" ]; then
+      echo "$name: Mitsuba 3 (${budget} s)" >&2
+      python3 tools/mitsuba-bench.py "$xml" --reference "$out/reference.exr" --seconds "$budget" \
+        --threads "$threads" --trim 0.0001 --block 4 --out "$out/mitsuba.exr" \
+        --json "$out/mitsuba.json" > "$out/mitsuba.log" 2>&1 \
+        || { rm -f "$out/mitsuba.json"; echo "$name: Mitsuba 3 failed, see $out/mitsuba.log" >&2; }
+    else
+      echo "no $xml: $name has no Mitsuba 3 version" > "$out/mitsuba.log"
+    fi
+  fi
   {
-    echo; echo "## $name"; echo; cat "$out/results.md"; echo
+    echo; echo "## $name"; echo
+    if [ "$mitsuba" = 1 ]; then
+      python3 bench/tables.py scene "$out" "$xml"
+    else
+      cat "$out/results.md"
+    fi
+    echo
     echo "![convergence](plots/$name-convergence.svg)"; echo
     echo "Reference, then each method in table order:"; echo
     echo "![images](plots/$name-strip.png)"
   } >> "$details"
 done
-# The headline: each scene's final checkpoint, the first method against the others.
-python3 - "$results" bench/out scenes/bench <<'PY'
-import json, pathlib, sys
-results, out, scenes = sys.argv[1], pathlib.Path(sys.argv[2]), pathlib.Path(sys.argv[3])
-rows = []
-for scene in sorted(scenes.glob("*.toml")):
-    methods = json.loads((out / scene.stem / "results.json").read_text())
-    base = methods[0]["checkpoints"][-1]["error"]["rel_mse"]["all"]
-    for m in methods[1:]:
-        e = m["checkpoints"][-1]["error"]["rel_mse"]["all"]
-        rows.append(f"| {scene.stem} | {base:.3e} | {m['name']} | {e:.3e} | {base / e:.2f} | {m['speedup']:.2f} |")
-head = ["", "## Summary", "",
-        "Equal-time relMSE of each method against the first (unguided); error ratio > 1 means",
-        "the method wins. Speed-up is the efficiency ratio 1 / (relMSE x seconds).", "",
-        "| scene | unguided relMSE | method | its relMSE | error ratio | speed-up |",
-        "|---|---|---|---|---|---|"]
-with open(results, "a") as f:
-    f.write("\n".join(head + rows) + "\n")
-PY
+# The headline: each scene's final checkpoint, the first method against the others (and
+# against Mitsuba 3 when it ran).
+python3 bench/tables.py summary "$results" bench/out scenes/bench "$mitsuba"
 cat "$details" >> "$results"
 rm -f "$details"
 echo "wrote $results" >&2

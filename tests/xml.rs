@@ -53,6 +53,20 @@ fn fog_sphere_xml_renders_exactly_as_the_toml() {
     assert!(image(&a, 6) == image(&b, 6), "fog sphere with -D: XML and TOML images differ");
 }
 
+/// The bench scenes' XML twins (which tools/mitsuba-bench.py renders with Mitsuba 3) are the
+/// same scenes as the TOML files bench/run.sh renders with zerovar: the same settings and,
+/// with the same seed, the same image bit for bit.
+#[test]
+fn bench_xml_twins_render_exactly_as_the_toml() {
+    for name in ["backlit-cloud", "chromatic-slab", "easy", "light-shaft", "occluded-light"] {
+        let a = edited(&format!("scenes/bench/{name}.toml"), &[], &[]);
+        let b = edited(&format!("scenes/bench/{name}.xml"), &[], &[]);
+        assert_eq!(format!("{:?}", a.settings), format!("{:?}", b.settings), "{name}");
+        assert_eq!(a.lights.len(), b.lights.len(), "{name}");
+        assert!(image(&a, 7) == image(&b, 7), "{name}: XML and TOML images differ");
+    }
+}
+
 #[test]
 fn cloud_xml_renders_exactly_as_the_toml_with_a_delta_sun() {
     let toml =
