@@ -61,8 +61,8 @@ fn bench_xml_twins_render_exactly_as_the_toml() {
     for name in ["backlit-cloud", "chromatic-slab", "easy", "light-shaft", "occluded-light"] {
         let a = edited(&format!("scenes/bench/{name}.toml"), &[], &[]);
         let b = edited(&format!("scenes/bench/{name}.xml"), &[], &[]);
-        assert_eq!(format!("{:?}", a.settings), format!("{:?}", b.settings), "{name}");
-        assert_eq!(a.lights.len(), b.lights.len(), "{name}");
+        assert_eq!(format!("{:?}", a.settings()), format!("{:?}", b.settings()), "{name}");
+        assert_eq!(a.lights().len(), b.lights().len(), "{name}");
         assert!(image(&a, 7) == image(&b, 7), "{name}: XML and TOML images differ");
     }
 }
