@@ -54,7 +54,8 @@ pub enum CompareError {
 impl Method {
     /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
     /// distances, rr, full or a +-list), `alpha`, `train-passes`, `train-time` (seconds),
-    /// `tracker` (a `--tracker` name). `NAME` alone means `base` unchanged.
+    /// `tracker` (a `--tracker` name), `combine` (true: training images join the result by
+    /// inverse variance, as `--combine-training`). `NAME` alone means `base` unchanged.
     pub fn parse(spec: &str, base: &RenderOptions) -> Result<Self, CompareError> {
         let err = |why: String| CompareError::Method { spec: spec.to_string(), why };
         let (name, rest) = spec.split_once('=').unwrap_or((spec, ""));
@@ -106,9 +107,16 @@ impl Method {
                 "tracker" => {
                     m.tracker = value.parse().map_err(|e| err(format!("tracker: {e}")))?;
                 }
+                "combine" => {
+                    m.options.guiding.combine_training = match value {
+                        "true" | "yes" | "1" => true,
+                        "false" | "no" | "0" => false,
+                        _ => return Err(err(format!("combine: `{value}` is not true or false"))),
+                    };
+                }
                 _ => {
                     return Err(err(format!(
-                        "unknown option `{key}`; use guiding, alpha, train-passes, train-time or tracker"
+                        "unknown option `{key}`; use guiding, alpha, train-passes, train-time, tracker or combine"
                     )));
                 }
             }
@@ -291,4 +299,33 @@ pub fn csv(results: &[MethodResult]) -> String {
         }
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::render::Budget;
+
+    #[test]
+    fn method_options_parse_and_bad_ones_are_named() {
+        let base = RenderOptions::unguided(Budget::Samples(4), 1);
+        let m = Method::parse("g=guiding:full,alpha:0.7,train-passes:3,combine:true", &base)
+            .expect("valid method");
+        assert_eq!(m.name, "g");
+        assert!(m.options.guiding.components.any() && m.options.guiding.combine_training);
+        assert_eq!(m.options.guiding.alpha, 0.7);
+        assert_eq!(m.options.guiding.train, TrainBudget::Passes(3));
+        let plain = Method::parse("u", &base).expect("a bare name");
+        assert!(!plain.options.guiding.combine_training && !plain.options.guiding.components.any());
+        for (spec, says) in [
+            ("g=combine:maybe", "combine: `maybe` is not true or false"),
+            ("g=alpha:2", "alpha 2 must lie in [0, 1]"),
+            ("g=speed:3", "unknown option `speed`"),
+            ("g=guiding", "is not key:value"),
+            ("bad name=guiding:full", "the name must be"),
+        ] {
+            let e = Method::parse(spec, &base).expect_err(spec).to_string();
+            assert!(e.contains(says), "{spec}: {e}");
+        }
+    }
 }
