@@ -63,7 +63,8 @@ def main():
     # voxel faces is exactly [-1, 1] x [-0.75, 0.75] x [-0.5, 0.5].
     d = blob((16, 12, 8))
     vdb.write(str(TESTS / "blob.vdb"), [float_grid("density", d, (-8, -6, -4), 0.125, (0.0625,) * 3)])
-    write_vol(TESTS / "blob.vol", d)
+    # The .vol holds the dense grid zerovar makes of it: the array with a border of zeros.
+    write_vol(TESTS / "blob.vol", np.pad(d, 1))
 
     # The same array saved as half floats.
     g = float_grid("density", d, (-8, -6, -4), 0.125, (0.0625,) * 3)

@@ -4,8 +4,10 @@
 //! type `Tree_float_5_4_3` (also saved as half floats), data uncompressed, zip-compressed or
 //! blosc-compressed with the lz4 or zlib codec (OpenVDB's default is blosc + lz4), with or
 //! without active-mask compression, and scale, translate and affine index-to-world maps. The
-//! active voxels and active tiles of the chosen grid, within their index bounding box, become a
-//! dense grid; every other voxel of the box holds the background value. The dense box is
+//! active voxels and active tiles of the chosen grid, within their index bounding box grown by
+//! one voxel on every side, become a dense grid; every other voxel of the box holds the
+//! background value, so trilinear lookups fade to the background at the box's faces as
+//! OpenVDB's own trilinear sampler does at the edge of the active voxels. The dense box is
 //! checked against `MAX_DENSE_VOXELS` before anything of its size is allocated, and every
 //! length read from the file is checked against the bytes that remain before it is used, so a
 //! hostile file costs at most a small multiple of its own size in memory.
@@ -72,6 +74,20 @@ pub enum VdbError {
         /// Bytes left in the file.
         left: usize,
     },
+    /// An offset points past the end of the file.
+    #[error(
+        "{path}: truncated: {what} starts at byte {pos} of a {len}-byte file; re-export the file"
+    )]
+    TruncatedAt {
+        /// The file.
+        path: PathBuf,
+        /// The structure the offset locates.
+        what: &'static str,
+        /// The offset.
+        pos: u64,
+        /// The file's length.
+        len: usize,
+    },
     /// The structure is inconsistent.
     #[error("{path}: corrupt VDB file: {what}; re-export the file")]
     Corrupt {
@@ -99,7 +115,8 @@ pub enum VdbError {
     /// The grid's active box expands to too many voxels.
     #[error(
         "{path}: grid `{name}`: its active voxels span index box {min:?} to {max:?}, {voxels} \
-         voxels, more than zerovar's limit of {limit}; crop or resample the grid"
+         voxels with a border of one, more than zerovar's limit of {limit}; crop or resample \
+         the grid"
     )]
     TooLarge {
         /// The file.
@@ -110,7 +127,7 @@ pub enum VdbError {
         min: [i64; 3],
         /// Largest active index.
         max: [i64; 3],
-        /// Voxels of the dense box.
+        /// Voxels of the dense box (the active box and a border of one voxel).
         voxels: u128,
         /// `MAX_DENSE_VOXELS`.
         limit: u64,
@@ -300,12 +317,14 @@ impl<'a> Reader<'a> {
         Ok(m)
     }
 
-    fn seek(&mut self, pos: u64, what: &str) -> Result<()> {
+    fn seek(&mut self, pos: u64, what: &'static str) -> Result<()> {
         if pos > self.b.len() as u64 {
-            return self.corrupt(format!(
-                "{what} is said to start at byte {pos} of a {}-byte file",
-                self.b.len()
-            ));
+            return Err(VdbError::TruncatedAt {
+                path: self.path.into(),
+                what,
+                pos,
+                len: self.b.len(),
+            });
         }
         self.pos = pos as usize;
         Ok(())
@@ -643,9 +662,11 @@ impl<'a> Reader<'a> {
                 what: format!("grid `{name}` has no active voxels"),
             });
         }
-        let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 1) as u128);
+        // One voxel of background on every side, so that interpolation fades to the
+        // background across the outermost half voxel, as OpenVDB's trilinear sampler does.
+        let dims = [0, 1, 2].map(|a| (hi[a] - lo[a] + 3) as u128);
         let voxels = dims[0] * dims[1] * dims[2];
-        let outside_i32 = (0..3).any(|a| lo[a] < i32::MIN.into() || hi[a] > i32::MAX.into());
+        let outside_i32 = (0..3).any(|a| lo[a] <= i32::MIN.into() || hi[a] >= i32::MAX.into());
         if voxels > MAX_DENSE_VOXELS.into() || outside_i32 {
             return Err(VdbError::TooLarge {
                 path: self.path.into(),
@@ -656,7 +677,7 @@ impl<'a> Reader<'a> {
                 limit: MAX_DENSE_VOXELS,
             });
         }
-        Ok((lo, dims.map(|d| d as usize)))
+        Ok((lo.map(|l| l - 1), dims.map(|d| d as usize)))
     }
 
     /// `count` values of a node (OpenVDB's `readCompressedValues`): per-node metadata, then the
@@ -906,16 +927,16 @@ mod tests {
     #[test]
     fn matches_the_vol_written_from_the_same_array_voxel_for_voxel() {
         // OpenVDB wrote blob.vdb (blosc + lz4, active-mask compression, eight root children
-        // around the origin) and blob.vol from one array.
+        // around the origin) from the array that blob.vol holds with a border of zeros.
         let g = read("blob.vdb", None).unwrap();
         let vol = VolGrid::read(&data("blob.vol")).unwrap();
-        assert_eq!((g.resolution, g.index_min), ([16, 12, 8], [-8, -6, -4]));
-        assert_eq!(g.resolution, vol.resolution);
-        assert_eq!(g.data, vol.data);
-        // Voxels of 1/8 shifted by 1/16: the faces of the box lie exactly on +-1, +-0.75, +-0.5.
+        assert_eq!((g.resolution, g.index_min), ([18, 14, 10], [-9, -7, -5]));
+        assert_eq!((vol.resolution, &vol.data), (g.resolution, &g.data));
+        // Voxels of 1/8 shifted by 1/16: the faces of the box (the active voxels' box grown by
+        // a voxel) lie exactly on +-1.125, +-0.875, +-0.625.
         let c = g.cube_to_world();
-        assert_eq!(c.matrix3, DMat3::from_diagonal(DVec3::new(2.0, 1.5, 1.0)));
-        assert_eq!(c.translation, DVec3::new(-1.0, -0.75, -0.5));
+        assert_eq!(c.matrix3, DMat3::from_diagonal(DVec3::new(2.25, 1.75, 1.25)));
+        assert_eq!(c.translation, DVec3::new(-1.125, -0.875, -0.625));
     }
 
     #[test]
@@ -937,12 +958,13 @@ mod tests {
     #[test]
     fn active_tiles_fill_their_regions_and_inactive_voxels_hold_the_background() {
         let g = read("tiles.vdb", None).unwrap();
-        assert_eq!((g.resolution, g.index_min), ([21, 8, 8], [0, 0, 0]));
+        assert_eq!((g.resolution, g.index_min), ([23, 10, 10], [-1, -1, -1]));
         assert_eq!(g.value([0, 0, 0]), Some(1.0));
         assert_eq!(g.value([15, 7, 7]), Some(1.0));
         assert_eq!(g.value([20, 3, 3]), Some(2.0));
         assert_eq!(g.value([18, 0, 0]), Some(0.0));
-        assert_eq!(g.value([21, 0, 0]), None);
+        assert_eq!(g.value([21, 8, -1]), Some(0.0));
+        assert_eq!(g.value([22, 0, 0]), None);
         assert_eq!(g.data.iter().filter(|&&v| v == 1.0).count(), 16 * 8 * 8);
     }
 
@@ -956,7 +978,11 @@ mod tests {
             "{err}"
         );
         let t = read("multi.vdb", Some("temperature")).unwrap();
-        assert!(t.data.iter().all(|&v| v == 1.0) && t.resolution == [4, 4, 4]);
+        assert_eq!(t.resolution, [6, 6, 6]);
+        assert_eq!(
+            (t.value([0, 0, 0]), t.value([3, 3, 3]), t.value([4, 0, 0])),
+            (Some(1.0), Some(1.0), Some(0.0))
+        );
         let err = read("multi.vdb", Some("vel")).unwrap_err().to_string();
         assert!(err.contains("grid `vel` is of type Tree_vec3s_5_4_3"), "{err}");
         let err = read("multi.vdb", Some("nope")).unwrap_err().to_string();
@@ -969,7 +995,7 @@ mod tests {
         assert!(
             matches!(
                 err,
-                VdbError::TooLarge { voxels: 1_003_003_001, max: [1000, 1000, 1000], .. }
+                VdbError::TooLarge { voxels: 1_009_027_027, max: [1000, 1000, 1000], .. }
             ),
             "{err}"
         );
