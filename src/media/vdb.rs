@@ -174,7 +174,7 @@ impl VdbGrid {
 
     /// Parses the bytes of a `.vdb` file; `path` only names it in errors.
     pub fn parse(path: &Path, bytes: &[u8], name: Option<&str>) -> Result<Self> {
-        Reader { path, b: bytes, pos: 0, version: 0 }.grid(name)
+        Reader { path, b: bytes, pos: 0, version: 0, tile_voxels: 0 }.grid(name)
     }
 
     /// The affine map from zerovar's unit cube to OpenVDB's world space: the cube's faces lie
@@ -234,6 +234,9 @@ struct Reader<'a> {
     b: &'a [u8],
     pos: usize,
     version: u32,
+    /// Voxels covered by the active tiles so far: tiles never overlap, so past
+    /// `MAX_DENSE_VOXELS` the box is too large, and a file cannot list tiles without bound.
+    tile_voxels: u64,
 }
 
 type Result<T> = std::result::Result<T, VdbError>;
@@ -579,7 +582,7 @@ impl<'a> Reader<'a> {
             let origin = self.coord("root tile")?;
             let value = self.f32("root tile")?;
             if self.u8("root tile")? != 0 {
-                tiles.push(Tile { origin, size: 1 << 12, value });
+                self.push_tile(&mut tiles, Tile { origin, size: 1 << 12, value })?;
             }
         }
         for _ in 0..child_count {
@@ -614,7 +617,8 @@ impl<'a> Reader<'a> {
         let on = |m: &[u64], i: usize| m[i / 64] >> (i % 64) & 1 == 1;
         for (i, v) in values.iter().enumerate() {
             if on(&active, i) && !on(&children, i) {
-                tiles.push(Tile { origin: slot_origin(i), size: 1 << child_log2, value: *v });
+                let tile = Tile { origin: slot_origin(i), size: 1 << child_log2, value: *v };
+                self.push_tile(tiles, tile)?;
             }
         }
         for i in (0..slots).filter(|&i| on(&children, i)) {
@@ -624,6 +628,18 @@ impl<'a> Reader<'a> {
                 leaves.push(Leaf { origin: slot_origin(i), mask: self.mask("leaf mask")? });
             }
         }
+        Ok(())
+    }
+
+    fn push_tile(&mut self, tiles: &mut Vec<Tile>, tile: Tile) -> Result<()> {
+        self.tile_voxels = self.tile_voxels.saturating_add((tile.size as u64).pow(3));
+        if self.tile_voxels > MAX_DENSE_VOXELS {
+            return self.unsupported(format!(
+                "the grid's active tiles cover more than {MAX_DENSE_VOXELS} voxels, zerovar's \
+                 limit; crop or resample the grid"
+            ));
+        }
+        tiles.push(tile);
         Ok(())
     }
 
@@ -937,6 +953,42 @@ mod tests {
         let c = g.cube_to_world();
         assert_eq!(c.matrix3, DMat3::from_diagonal(DVec3::new(2.25, 1.75, 1.25)));
         assert_eq!(c.translation, DVec3::new(-1.125, -0.875, -0.625));
+    }
+
+    #[test]
+    fn raw_and_zip_data_read_like_blosc() {
+        // blob-raw.vdb is blob.vdb rewritten by OpenVDB with active-mask compression only.
+        let (raw, blosc) = (read("blob-raw.vdb", None).unwrap(), read("blob.vdb", None).unwrap());
+        assert_eq!(raw, blosc);
+        // This OpenVDB build writes no zip, so zip framing is checked on its own: an i64 byte
+        // count, then a zlib stream, or a negative count and the bytes as they are.
+        let values: Vec<u8> = (0..64u8).collect();
+        let mut z = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::best());
+        std::io::Write::write_all(&mut z, &values).unwrap();
+        let z = z.finish().unwrap();
+        let mut zipped = (z.len() as i64).to_le_bytes().to_vec();
+        zipped.extend_from_slice(&z);
+        let mut stored = (-64i64).to_le_bytes().to_vec();
+        stored.extend_from_slice(&values);
+        for bytes in [zipped, stored] {
+            let mut r = Reader {
+                path: Path::new("z.vdb"),
+                b: &bytes,
+                pos: 0,
+                version: 224,
+                tile_voxels: 0,
+            };
+            assert_eq!(r.data(COMPRESS_ZIP, 64).unwrap(), values);
+            assert_eq!(r.pos, bytes.len());
+            let mut r = Reader {
+                path: Path::new("z.vdb"),
+                b: &bytes,
+                pos: 0,
+                version: 224,
+                tile_voxels: 0,
+            };
+            assert!(r.data(COMPRESS_ZIP, 65).is_err());
+        }
     }
 
     #[test]
