@@ -176,6 +176,22 @@ fn bad_vdb_files_are_errors_naming_the_file_and_the_fix() {
     }
     let e = load("bad.toml", &toml("density = 1\ngrid_name = \"density\"")).unwrap_err();
     assert!(e.to_string().contains("applies only to a .vdb"), "{e}");
+    // In XML: a grid name for a .vol file, and a grid the file lacks, at the volume's line.
+    for (file, name, needle) in [
+        (data("blob.vol"), "density", "bad.xml:4:1: grid_name applies only to a .vdb"),
+        (data("multi.vdb"), "fog", "no grid named `fog`"),
+    ] {
+        let xml = format!(
+            "<scene version=\"3.0.0\">\n<medium type=\"heterogeneous\" id=\"m\">\n\
+             <volume type=\"gridvolume\" name=\"sigma_t\"><string name=\"filename\" \
+             value=\"{file}\"/>\n<string name=\"grid_name\" value=\"{name}\"/></volume>\n\
+             </medium>\n<shape type=\"cube\"><ref name=\"interior\" id=\"m\"/>\
+             <bsdf type=\"null\"/></shape>\n<emitter type=\"constant\"/>\n<sensor type=\"perspective\"><float name=\"fov\" \
+             value=\"40\"/></sensor>\n<integrator type=\"volpath\"/>\n</scene>\n"
+        );
+        let e = zerovar::scene::load(&write("bad.xml", &xml), &[]).unwrap_err().to_string();
+        assert!(e.contains(needle), "{e}");
+    }
 }
 
 #[test]

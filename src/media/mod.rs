@@ -1,8 +1,9 @@
 //! Participating media: what a ray meets between surfaces.
 //!
 //! A medium is either homogeneous (constant RGB extinction and albedo) or heterogeneous: a
-//! density field (a `.vol` or `.vdb` grid or the procedural noise cloud) over the unit cube placed by
-//! `to_world`, scaled and optionally tinted per channel, with a constant or gridded RGB albedo.
+//! density field (a `.vol` or `.vdb` grid or the procedural noise cloud) over the unit cube
+//! placed by `to_world`, scaled and optionally tinted per channel, with a constant or gridded
+//! RGB albedo.
 //! Outside its box a heterogeneous medium is empty. Each medium also has a phase function and
 //! an optional emission: radiance emitted per unit length is `sigma_a(x) * emission`.
 //! `tracking` decides how to walk through a medium; this module only answers lookups.

@@ -449,7 +449,8 @@ impl<'a> Reader<'a> {
             let mask = self.mask::<8>("leaf mask")?;
             if mask != leaf.mask {
                 return self.corrupt(format!(
-                    "the leaf at index {:?} has different active voxels in its topology and its data",
+                    "the leaf at index {:?} has different active voxels in its topology and its \
+                     data",
                     leaf.origin
                 ));
             }

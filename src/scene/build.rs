@@ -405,7 +405,8 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
                     let (grid, cube_to_vdb) = read_vdb(cx, &cx.file(&f), d.grid_name.as_deref())?;
                     if matches!(d.albedo, Some(AlbedoDesc::File(_))) {
                         return cx.err(
-                            "an albedo grid needs a .vol density on the same unit cube; give a                              constant albedo with a .vdb density",
+                            "an albedo grid needs a .vol density on the same unit cube; give a \
+                             constant albedo with a .vdb density",
                         );
                     }
                     placement = Some(cube_to_vdb);
