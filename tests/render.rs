@@ -179,7 +179,7 @@ fn example_scenes_load() {
             n += 1;
         }
     }
-    assert!(n >= 9, "expected the four example and five bench scenes, found {n}");
+    assert!(n >= 10, "expected the five example and five bench scenes, found {n}");
 }
 
 /// Next-event estimation towards an area light sees the whole light from a surface far from

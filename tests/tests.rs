@@ -10,4 +10,5 @@ mod render;
 mod single_scatter;
 mod tracking;
 mod transmittance;
+mod vdb;
 mod xml;

@@ -1,8 +1,9 @@
 //! Participating media: what a ray meets between surfaces.
 //!
 //! A medium is either homogeneous (constant RGB extinction and albedo) or heterogeneous: a
-//! density field (a `.vol` grid or the procedural noise cloud) over the unit cube placed by
-//! `to_world`, scaled and optionally tinted per channel, with a constant or gridded RGB albedo.
+//! density field (a `.vol` or `.vdb` grid or the procedural noise cloud) over the unit cube
+//! placed by `to_world`, scaled and optionally tinted per channel, with a constant or gridded
+//! RGB albedo.
 //! Outside its box a heterogeneous medium is empty. Each medium also has a phase function and
 //! an optional emission: radiance emitted per unit length is `sigma_a(x) * emission`.
 //! `tracking` decides how to walk through a medium; this module only answers lookups.
@@ -10,11 +11,13 @@
 mod grid;
 mod majorant;
 mod noise;
+mod vdb;
 mod vol;
 
 pub use grid::Grid;
 pub use majorant::{CellSpan, Dda, MajorantGrid};
 pub use noise::NoiseCloud;
+pub use vdb::{MAX_DENSE_VOXELS, VdbError, VdbGrid};
 pub use vol::{VolError, VolGrid};
 
 use crate::math::{Aabb, Ray, Spectrum, is_grey};

@@ -8,7 +8,9 @@ use crate::bsdf::{Bsdf, Texture};
 use crate::camera::Camera;
 use crate::lights::{EnvMap, Light};
 use crate::math::{Frame, Spectrum};
-use crate::media::{AlbedoField, DensityField, Grid, Heterogeneous, Medium, MediumKind, VolGrid};
+use crate::media::{
+    AlbedoField, DensityField, Grid, Heterogeneous, Medium, MediumKind, VdbGrid, VolGrid,
+};
 use crate::phase::PhaseFunction;
 use crate::shapes::{Disk, Geometry, Mesh, Sphere};
 use crate::tracking::Tracker;
@@ -399,6 +401,7 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
                 "homogeneous media",
                 &[
                     ("density", d.density.is_some()),
+                    ("grid_name", d.grid_name.is_some()),
                     ("noise", d.noise.is_some()),
                     ("transform", !d.transform.is_empty()),
                 ],
@@ -407,7 +410,20 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
         }
         "grid" => {
             cx.only("grid media", &[("noise", d.noise.is_some())])?;
+            // A `.vdb` grid brings its own placement, which the medium's transform then moves.
+            let mut placement = None;
             let density = match cx.required("density", &d.density)? {
+                DensityDesc::File(f) if is_vdb(&f) => {
+                    let (grid, cube_to_vdb) = read_vdb(cx, &cx.file(&f), d.grid_name.as_deref())?;
+                    if matches!(d.albedo, Some(AlbedoDesc::File(_))) {
+                        return cx.err(
+                            "an albedo grid needs a .vol density on the same unit cube; give a \
+                             constant albedo with a .vdb density",
+                        );
+                    }
+                    placement = Some(cube_to_vdb);
+                    grid
+                }
                 DensityDesc::File(f) => read_grid(cx, &cx.file(&f), &[1])?,
                 DensityDesc::Constant(v) => {
                     if !(v >= 0.0 && v.is_finite()) {
@@ -416,7 +432,13 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
                     Grid::new(VolGrid { resolution: [1, 1, 1], channels: 1, data: vec![v] })
                 }
             };
+            if d.grid_name.is_some() && placement.is_none() {
+                return cx.err("`grid_name` applies only to a .vdb density; remove it");
+            }
             let albedo = match &d.albedo {
+                Some(AlbedoDesc::File(f)) if is_vdb(f) => {
+                    return cx.err("albedo grids are read from .vol files; .vdb holds densities");
+                }
                 Some(AlbedoDesc::File(f)) => {
                     AlbedoField::Grid(read_grid(cx, &cx.file(f), &[1, 3])?)
                 }
@@ -431,6 +453,7 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
                 ));
             }
             let to_world = cx.transform(&d.transform)?;
+            let to_world = placement.map_or(to_world, |p| p.then(&to_world));
             MediumKind::Heterogeneous(Box::new(Heterogeneous::new(
                 to_world,
                 DensityField::Grid(density),
@@ -440,7 +463,10 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
             )))
         }
         "noise" => {
-            cx.only("noise media", &[("density", d.density.is_some())])?;
+            cx.only(
+                "noise media",
+                &[("density", d.density.is_some()), ("grid_name", d.grid_name.is_some())],
+            )?;
             let noise = d.noise.unwrap_or_default();
             let n = [noise.frequency, noise.amplitude, noise.threshold, noise.sharpness];
             cx.finite("noise parameters", &n)?;
@@ -477,6 +503,31 @@ fn read_grid(cx: &Ctx<'_>, file: &Path, channels: &[usize]) -> Result<Grid> {
         ));
     }
     Ok(Grid::new(vol))
+}
+
+/// Whether a density file is an OpenVDB file (by its extension, as OpenVDB's tools decide).
+pub(super) fn is_vdb(file: &str) -> bool {
+    Path::new(file).extension().is_some_and(|e| e.eq_ignore_ascii_case("vdb"))
+}
+
+/// A `.vdb` float grid as a dense grid, and the map from its unit cube to the VDB's world
+/// space (the medium's local space).
+fn read_vdb(cx: &Ctx<'_>, file: &Path, name: Option<&str>) -> Result<(Grid, Transform)> {
+    let vdb = VdbGrid::read(file, name).or_else(|e| cx.err(e.to_string()))?;
+    let m = vdb.cube_to_world();
+    let placement = Transform::new(glam::Affine3A {
+        matrix3: m.matrix3.as_mat3().into(),
+        translation: m.translation.as_vec3().into(),
+    });
+    let Some(placement) = placement else {
+        return cx.err(format!(
+            "{}: grid `{}`: its index-to-world transform does not fit in single precision",
+            file.display(),
+            vdb.name
+        ));
+    };
+    let vol = VolGrid { resolution: vdb.resolution, channels: 1, data: vdb.data };
+    Ok((Grid::new(vol), placement))
 }
 
 fn light(cx: &Ctx<'_>, d: &LightDesc) -> Result<Light> {

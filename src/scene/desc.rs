@@ -224,8 +224,11 @@ pub struct MediumDesc {
     pub albedo: Option<AlbedoDesc>,
     /// Multiplies the extinction.
     pub scale: Option<f32>,
-    /// Grid: the density, a `.vol` file or a constant filling the unit cube.
+    /// Grid: the density, a `.vol` or `.vdb` file or a constant filling the unit cube.
     pub density: Option<DensityDesc>,
+    /// Grid with a `.vdb` density: which of the file's float grids (default `density`, or the
+    /// only float grid).
+    pub grid_name: Option<String>,
     /// Noise: cloud parameters.
     pub noise: Option<crate::media::NoiseCloud>,
     /// Grid, noise: places the unit cube.
@@ -237,13 +240,13 @@ pub struct MediumDesc {
     pub emission: Option<Rgb>,
 }
 
-/// A grid medium's density: a `.vol` file, or one value filling the unit cube.
+/// A grid medium's density: a `.vol` or `.vdb` file, or one value filling the unit cube.
 #[derive(Clone, Debug, Deserialize)]
 #[serde(untagged)]
 pub enum DensityDesc {
     /// The same density everywhere in the cube.
     Constant(f32),
-    /// A one-channel `.vol` file.
+    /// A one-channel `.vol` file, or an OpenVDB float grid (a name ending in `.vdb`).
     File(String),
 }
 

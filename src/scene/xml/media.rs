@@ -5,10 +5,14 @@
 //! filling the unit cube placed by the volume's `to_world`, empty outside it as in Mitsuba)
 //! gives the density and the box, a constant extinction becomes the grid's tint, and an albedo
 //! grid must share the extinction's box. Mitsuba's defaults: sigma_t 1, albedo 0.75, hg g 0.8.
+//! As a zerovar extension, a `gridvolume` filename may name an OpenVDB `.vdb` file (with an
+//! optional `<string name="grid_name">`); its own index-to-world map places it, and the
+//! volume's `to_world` then moves it, as for `.vdb` densities in TOML scenes.
 
 use super::props::{COLOR, Props, color};
 use super::tree::{Object, Value};
 use super::{Conv, Result, compose, spanned};
+use crate::scene::build::is_vdb;
 use crate::scene::desc::{AlbedoDesc, DensityDesc, MediumDesc, PhaseDesc, Rgb, TransformStep};
 use std::rc::Rc;
 
@@ -16,8 +20,8 @@ use std::rc::Rc;
 enum Volume {
     /// A constant, with the box it fills.
     Constant(Rgb, Vec<TransformStep>),
-    /// A `.vol` file (relative to the scene file) and its box.
-    Grid(String, Vec<TransformStep>),
+    /// A `.vol` or `.vdb` file (relative to the scene file), its box and (`.vdb`) grid name.
+    Grid(String, Vec<TransformStep>, Option<String>),
 }
 
 impl Conv {
@@ -82,12 +86,15 @@ impl Conv {
                 let (density, tint, transform) = match self.volume(&p, "sigma_t")? {
                     None => (DensityDesc::Constant(1.0), None, Vec::new()),
                     Some(Volume::Constant(c, t)) => (DensityDesc::Constant(1.0), Some(c), t),
-                    Some(Volume::Grid(f, t)) => (DensityDesc::File(f), None, t),
+                    Some(Volume::Grid(f, t, grid_name)) => {
+                        d.grid_name = grid_name;
+                        (DensityDesc::File(f), None, t)
+                    }
                 };
                 d.albedo = match self.volume(&p, "albedo")? {
                     None => None,
                     Some(Volume::Constant(c, _)) => Some(AlbedoDesc::Constant(c)),
-                    Some(Volume::Grid(f, t)) => {
+                    Some(Volume::Grid(f, t, _)) => {
                         let same = compose(&t, &o.pos, "albedo to_world")?
                             .m
                             .abs_diff_eq(compose(&transform, &o.pos, "sigma_t to_world")?.m, 1e-6);
@@ -155,7 +162,14 @@ impl Conv {
                         "use_grid_bbox = true is not supported; place the unit cube with to_world",
                     ));
                 }
-                Volume::Grid(file, transform)
+                // A zerovar extension: Mitsuba reads only .vol files here.
+                let grid_name = match v.string("grid_name")? {
+                    Some((_, at)) if !is_vdb(&file) => {
+                        return Err(at.pos.err("grid_name applies only to a .vdb filename"));
+                    }
+                    g => g.map(|(name, _)| name.to_string()),
+                };
+                Volume::Grid(file, transform, grid_name)
             }
             other => {
                 return Err(
