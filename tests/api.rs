@@ -52,7 +52,7 @@ impl DensityFunction for Host {
 
 fn grid() -> Grid {
     let data = (0..6 * 5 * 4).map(|i| ((i * 37 % 11) as f32 / 10.0).powi(2)).collect();
-    Grid::new(VolGrid { resolution: [6, 5, 4], channels: 1, data })
+    Grid::new(VolGrid::new([6, 5, 4], 1, data).expect("a valid grid"))
 }
 
 fn medium(density: DensityField) -> Medium {
@@ -90,11 +90,9 @@ fn a_host_density_renders_like_the_same_grid() {
     other
         .replace_medium(
             "m",
-            medium(DensityField::Custom(Arc::new(Host(Grid::new(VolGrid {
-                resolution: [1, 1, 1],
-                channels: 1,
-                data: vec![0.1],
-            }))))),
+            medium(DensityField::Custom(Arc::new(Host(Grid::new(
+                VolGrid::new([1, 1, 1], 1, vec![0.1]).expect("a valid grid"),
+            ))))),
         )
         .unwrap();
     let c =

@@ -67,11 +67,15 @@ direction = [0, -1, 0]
 irradiance = 1
 "#;
 
+/// A 2x2x1 `.vol` file, written byte by byte so that it may hold values no `VolGrid` accepts.
 fn vol(values: &[f32]) -> Vec<u8> {
-    let mut b = Vec::new();
-    zerovar::media::VolGrid { resolution: [2, 2, 1], channels: 1, data: values.to_vec() }
-        .write(&mut b)
-        .unwrap();
+    let mut b = b"VOL\x03".to_vec();
+    for i in [1i32, 2, 2, 1, 1] {
+        b.extend_from_slice(&i.to_le_bytes());
+    }
+    for v in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0].iter().chain(values) {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
     b
 }
 

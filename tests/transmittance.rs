@@ -103,11 +103,8 @@ fn homogeneous_slabs_match_exp_minus_tau() {
 #[test]
 fn heterogeneous_slabs_match_quadrature() {
     // A ramp grid: trilinear between voxel centres, clamped outside them.
-    let vol = VolGrid {
-        resolution: [4, 2, 2],
-        channels: 1,
-        data: (0..16).map(|i| (i % 4) as f32 * 0.5 + 0.1).collect(),
-    };
+    let vol = VolGrid::new([4, 2, 2], 1, (0..16).map(|i| (i % 4) as f32 * 0.5 + 0.1).collect())
+        .expect("a valid grid");
     let grid = heterogeneous(DensityField::Grid(Grid::new(vol)), 1.5, Spectrum::ONE);
     check(&grid, 10.0, reference(&grid, &ray(), 10.0), "ramp grid, delta tracking");
     let noise = heterogeneous(DensityField::Noise(NoiseCloud::default()), 6.0, Spectrum::ONE);

@@ -492,7 +492,8 @@ fn cli_checks_and_renders_xml_and_fails_cleanly() {
 fn volumes_and_meshes_match_the_toml_format() {
     write("tri.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n");
     let mut albedo = Vec::new();
-    zerovar::media::VolGrid { resolution: [2, 1, 1], channels: 1, data: vec![0.5, 0.9] }
+    zerovar::media::VolGrid::new([2, 1, 1], 1, vec![0.5, 0.9])
+        .expect("a valid grid")
         .write(&mut albedo)
         .unwrap();
     write("albedo.vol", albedo);

@@ -972,23 +972,17 @@ mod tests {
         let mut stored = (-64i64).to_le_bytes().to_vec();
         stored.extend_from_slice(&values);
         for bytes in [zipped, stored] {
-            let mut r = Reader {
+            let reader = || Reader {
                 path: Path::new("z.vdb"),
                 b: &bytes,
                 pos: 0,
                 version: 224,
                 tile_voxels: 0,
             };
+            let mut r = reader();
             assert_eq!(r.data(COMPRESS_ZIP, 64).unwrap(), values);
             assert_eq!(r.pos, bytes.len());
-            let mut r = Reader {
-                path: Path::new("z.vdb"),
-                b: &bytes,
-                pos: 0,
-                version: 224,
-                tile_voxels: 0,
-            };
-            assert!(r.data(COMPRESS_ZIP, 65).is_err());
+            assert!(reader().data(COMPRESS_ZIP, 65).is_err());
         }
     }
 

@@ -64,18 +64,62 @@ pub enum VolError {
     },
 }
 
-/// A dense grid as read from a `.vol` file.
+/// A dense grid as read from a `.vol` file, or built in code with [`VolGrid::new`]: its size
+/// always matches its values, and every value is finite and non-negative.
 #[derive(Clone, Debug, PartialEq)]
 pub struct VolGrid {
     /// Resolution along x, y, z.
-    pub resolution: [usize; 3],
+    pub(crate) resolution: [usize; 3],
     /// Values per voxel.
-    pub channels: usize,
+    pub(crate) channels: usize,
     /// `resolution[0] * resolution[1] * resolution[2] * channels` values, x fastest.
-    pub data: Vec<f32>,
+    pub(crate) data: Vec<f32>,
 }
 
 impl VolGrid {
+    /// A grid of `resolution` voxels with `channels` values each, from `data` (x fastest,
+    /// channels interleaved), checked as a file's would be.
+    pub fn new(resolution: [usize; 3], channels: usize, data: Vec<f32>) -> Result<Self, VolError> {
+        let path = Path::new("<grid built in code>");
+        let expected = resolution
+            .iter()
+            .try_fold(channels, |n, &r| n.checked_mul(r))
+            .filter(|&n| n > 0)
+            .ok_or_else(|| VolError::Header {
+                path: path.into(),
+                what: format!(
+                    "resolution {resolution:?} with {channels} channels is empty or too large"
+                ),
+            })?;
+        if data.len() != expected {
+            return Err(VolError::Header {
+                path: path.into(),
+                what: format!(
+                    "resolution {resolution:?} with {channels} channels needs {expected} values, \
+                     not {}",
+                    data.len()
+                ),
+            });
+        }
+        check_values(path, resolution, channels, &data)?;
+        Ok(Self { resolution, channels, data })
+    }
+
+    /// Resolution along x, y, z.
+    pub fn resolution(&self) -> [usize; 3] {
+        self.resolution
+    }
+
+    /// Values per voxel.
+    pub fn channels(&self) -> usize {
+        self.channels
+    }
+
+    /// The values, x fastest, channels interleaved.
+    pub fn data(&self) -> &[f32] {
+        &self.data
+    }
+
     /// Reads and validates a grid: every value must be finite and non-negative, since it is a
     /// density or an albedo.
     pub fn read(path: &Path) -> Result<Self, VolError> {
@@ -126,24 +170,7 @@ impl VolGrid {
             .chunks_exact(4)
             .map(|b| f32::from_le_bytes(b.try_into().unwrap()))
             .collect();
-        if let Some((i, &value)) =
-            data.iter().enumerate().find(|(_, v)| !v.is_finite() || **v < 0.0)
-        {
-            let voxel = i / c;
-            return Err(VolError::BadValue {
-                path: path.into(),
-                x: voxel % x,
-                y: voxel / x % y,
-                z: voxel / (x * y),
-                channel: i % c,
-                value,
-                why: if value.is_finite() {
-                    "densities and albedos cannot be negative"
-                } else {
-                    "grids must hold finite numbers"
-                },
-            });
-        }
+        check_values(path, [x, y, z], c, &data)?;
         Ok(Self { resolution: [x, y, z], channels: c, data })
     }
 
@@ -164,12 +191,55 @@ impl VolGrid {
     }
 }
 
+/// Every value must be finite and non-negative, since it is a density or an albedo.
+fn check_values(
+    path: &Path,
+    [x, y, _]: [usize; 3],
+    c: usize,
+    data: &[f32],
+) -> Result<(), VolError> {
+    if let Some((i, &value)) = data.iter().enumerate().find(|(_, v)| !v.is_finite() || **v < 0.0) {
+        let voxel = i / c;
+        return Err(VolError::BadValue {
+            path: path.into(),
+            x: voxel % x,
+            y: voxel / x % y,
+            z: voxel / (x * y),
+            channel: i % c,
+            value,
+            why: if value.is_finite() {
+                "densities and albedos cannot be negative"
+            } else {
+                "grids must hold finite numbers"
+            },
+        });
+    }
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     fn grid() -> VolGrid {
         VolGrid { resolution: [3, 2, 2], channels: 1, data: (0..12).map(|i| i as f32).collect() }
+    }
+
+    #[test]
+    fn grids_built_in_code_are_checked_like_files() {
+        assert_eq!(VolGrid::new([3, 2, 2], 1, grid().data).unwrap(), grid());
+        let cases: [([usize; 3], usize, Vec<f32>, &str); 4] = [
+            ([3, 2, 2], 1, vec![1.0; 11], "needs 12 values, not 11"),
+            ([0, 2, 2], 1, vec![], "empty or too large"),
+            ([usize::MAX, 2, 2], 1, vec![], "empty or too large"),
+            ([2, 1, 1], 1, vec![1.0, -0.5], "voxel (1, 0, 0) channel 0 holds -0.5"),
+        ];
+        for (res, c, data, says) in cases {
+            let e = VolGrid::new(res, c, data).unwrap_err().to_string();
+            assert!(e.contains(says) && e.contains("<grid built in code>"), "{e}");
+        }
+        let e = VolGrid::new([1, 1, 1], 2, vec![0.0, f32::NAN]).unwrap_err().to_string();
+        assert!(e.contains("finite"), "{e}");
     }
 
     fn bytes(g: &VolGrid) -> Vec<u8> {
