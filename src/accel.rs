@@ -158,8 +158,8 @@ impl Bvh {
         }
         let inv_dir = ray.direction.recip();
         let neg = [inv_dir.x < 0.0, inv_dir.y < 0.0, inv_dir.z < 0.0];
-        let mut stack = [0u32; STACK];
-        let mut sp = 0usize;
+        // An ArrayVec, not an array: zeroing 512 bytes per ray was 5% of a render.
+        let mut stack = arrayvec::ArrayVec::<u32, STACK>::new();
         let mut current = 0usize;
         let mut best: Option<BvhHit> = None;
         loop {
@@ -183,17 +183,13 @@ impl Bvh {
                         (current + 1, node.offset as usize)
                     };
                     // The build bounds the depth (SAH_DEPTH), so the stack cannot overflow.
-                    stack[sp] = far as u32;
-                    sp += 1;
+                    stack.push(far as u32);
                     current = near;
                     continue;
                 }
             }
-            if sp == 0 {
-                break;
-            }
-            sp -= 1;
-            current = stack[sp] as usize;
+            let Some(next) = stack.pop() else { break };
+            current = next as usize;
         }
         best
     }

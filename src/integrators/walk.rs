@@ -187,17 +187,25 @@ fn walk<C: RadianceCache>(
                 l += s.beta * direct.contribution;
                 // Earlier vertices learn it (this one learns it in its direct fluence).
                 record_contribution(ctx, s.beta * direct.contribution);
-                let (wi, pdf) = if product && sampler.next_1d() < alpha {
-                    let (wi, _) = ctx.cache.sample(sampler.next_2d());
-                    (wi, mix_pdf(ctx.cache, wi))
+                // (direction, its density, phase value / density)
+                let (wi, pdf, weight) = if product {
+                    let wi = if sampler.next_1d() < alpha {
+                        ctx.cache.sample(sampler.next_2d()).0
+                    } else {
+                        phase.sample(dir, sampler.next_2d()).0
+                    };
+                    let pp = phase.eval(dir, wi);
+                    let pdf = alpha * ctx.cache.pdf(wi) + (1.0 - alpha) * pp;
+                    (wi, pdf, pp / pdf)
                 } else {
+                    // Phase sampling draws exactly the phase function: the weight is one.
                     let (wi, pp) = phase.sample(dir, sampler.next_2d());
-                    (wi, if product { mix_pdf(ctx.cache, wi) } else { pp })
+                    (wi, pp, 1.0)
                 };
                 if !positive(pdf) {
                     break;
                 }
-                s.beta *= phase.eval(dir, wi) / pdf;
+                s.beta *= weight;
                 record_vertex(ctx, p, wi, pdf, s.beta, true, &direct);
                 s.ray = Ray::new(p, wi);
                 s.prev = Previous { position: p, pdf, delta: false };
