@@ -466,7 +466,7 @@ fn null_collision_flight(
     let mut emitted = Spectrum::ZERO;
     let mut t = t0;
     loop {
-        t += -(-sampler.next_1d()).ln_1p() / majorant;
+        t += crate::tracking::unit_exponential(sampler.next_1d()) / majorant;
         if t >= t1 {
             return GuidedFlight { event: GuidedEvent::Pass, weight, emitted };
         }

@@ -22,6 +22,7 @@ mod estimators;
 
 pub(crate) use choice::explain;
 pub use choice::{TrackerChoice, TrackerError};
+pub(crate) use estimators::unit_exponential;
 pub use estimators::{SpectralEvent, SpectralProbabilities};
 
 use crate::math::{Ray, Spectrum};
