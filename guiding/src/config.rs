@@ -26,7 +26,7 @@ pub struct FieldConfig {
     pub initial_kappa: f32,
     /// Lobes a mixture may grow to by splitting (default 32; used when `split_merge` is on).
     pub max_lobes: usize,
-    /// A leaf splits once it has seen this many samples since it was created (default 16,000).
+    /// A leaf splits once it has seen this many samples since it was created (default 4,000).
     pub max_samples_per_leaf: usize,
     /// Leaves at this depth never split (default 32).
     pub max_depth: u32,
@@ -68,7 +68,7 @@ impl Default for FieldConfig {
             initial_lobes: 8,
             initial_kappa: 2.0,
             max_lobes: MAX_LOBES,
-            max_samples_per_leaf: 16_000,
+            max_samples_per_leaf: 4_000,
             max_depth: 32,
             em_iterations: 4,
             weight_prior: 0.01,
