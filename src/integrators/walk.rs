@@ -177,12 +177,14 @@ fn walk<C: RadianceCache>(
                 let product = guide.directions && loaded && ctx.cache.product_hg(dir, g);
                 counters.field_lookups += u64::from(loaded);
                 counters.products += u64::from(product && g.abs() >= PRODUCT_MIN_G);
-                let mix_pdf = |cache: &C, wi: Vec3A| {
+                // The phase function's value towards `wi` and the density of drawing `wi`.
+                let phase_and_pdf = |cache: &C, wi: Vec3A| {
                     let pp = phase.eval(dir, wi);
-                    if product { alpha * cache.pdf(wi) + (1.0 - alpha) * pp } else { pp }
+                    (pp, if product { alpha * cache.pdf(wi) + (1.0 - alpha) * pp } else { pp })
                 };
                 let direct = sample_light(scene, p, None, s.medium, sampler, counters, |wi| {
-                    (Spectrum::splat(phase.eval(dir, wi)), mix_pdf(ctx.cache, wi))
+                    let (pp, pdf) = phase_and_pdf(ctx.cache, wi);
+                    (Spectrum::splat(pp), pdf)
                 });
                 l += s.beta * direct.contribution;
                 // Earlier vertices learn it (this one learns it in its direct fluence).
@@ -194,8 +196,7 @@ fn walk<C: RadianceCache>(
                     } else {
                         phase.sample(dir, sampler.next_2d()).0
                     };
-                    let pp = phase.eval(dir, wi);
-                    let pdf = alpha * ctx.cache.pdf(wi) + (1.0 - alpha) * pp;
+                    let (pp, pdf) = phase_and_pdf(ctx.cache, wi);
                     (wi, pdf, pp / pdf)
                 } else {
                     // Phase sampling draws exactly the phase function: the weight is one.

@@ -263,7 +263,6 @@ pub fn render(
     options: &RenderOptions,
     progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
-    options.validate()?;
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
         if !options.guiding.components.any() {
@@ -287,7 +286,6 @@ pub fn render_with_field(
     trained: &TrainedField,
     progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
-    options.validate()?;
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
         let guidance = Guidance {
@@ -306,7 +304,6 @@ pub fn train(
     options: &RenderOptions,
     progress: &Progress<'_>,
 ) -> Result<(TrainedField, TrainingReport), RenderError> {
-    options.validate()?;
     in_pool(options, |_| {
         let progress = &Monitor::new(progress);
         let (field, direct, _, report) = train_in_pool(scene, options, progress)?;
@@ -318,6 +315,8 @@ fn in_pool<T: Send>(
     options: &RenderOptions,
     work: impl FnOnce(usize) -> Result<T, RenderError> + Send,
 ) -> Result<T, RenderError> {
+    // Every entry point starts here, so none can skip the checks.
+    options.validate()?;
     let mut builder = rayon::ThreadPoolBuilder::new();
     if let Some(t) = options.threads {
         builder = builder.num_threads(t);
