@@ -25,8 +25,10 @@ pub struct Counters {
     /// Guiding-field queries: a region's distribution loaded at a vertex, or its estimates
     /// read for guided distances.
     pub field_lookups: u64,
-    /// Products of a region's mixture with a phase function.
+    /// Exact products of a region's mixture with a phase function.
     pub products: u64,
+    /// Approximate products: a region's lobes reweighted by the phase function.
+    pub reweighted_products: u64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -41,6 +43,7 @@ impl std::ops::AddAssign for Counters {
         self.invalid_samples += o.invalid_samples;
         self.field_lookups += o.field_lookups;
         self.products += o.products;
+        self.reweighted_products += o.reweighted_products;
     }
 }
 
@@ -81,8 +84,10 @@ pub struct RenderStats {
     pub guided_density_lookups_per_path: f64,
     /// Guiding-field queries per path.
     pub field_lookups_per_path: f64,
-    /// Products of a region's mixture with the phase function per path.
+    /// Exact products of a region's mixture with the phase function per path.
     pub products_per_path: f64,
+    /// Reweighted (approximate) products with the phase function per path.
+    pub reweighted_products_per_path: f64,
 }
 
 /// The training part of `--stats`.
@@ -126,6 +131,7 @@ impl RenderStats {
             guided_density_lookups_per_path: per_path(c.guided_density_lookups),
             field_lookups_per_path: per_path(c.field_lookups),
             products_per_path: per_path(c.products),
+            reweighted_products_per_path: per_path(c.reweighted_products),
         }
     }
 }

@@ -6,7 +6,7 @@ use crate::common::{quadrant_means, scene};
 use glam::{Vec2, Vec3A};
 use std::cell::RefCell;
 use zerovar::film::Film;
-use zerovar::guided::distance::GuidedDistance;
+use zerovar::guided::distance::{GuidedDistance, GuidedEvent};
 use zerovar::guided::{Components, NoCache, RadianceCache};
 use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
 use zerovar::math::Ray;
@@ -119,6 +119,109 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
             chi2_1d(&samples, &pdf, &edges, &[(-1.0, pass)])
                 .assert_pass(1e-3, &format!("{text}, alpha {alpha}"));
         }
+    }
+}
+
+/// A cache giving the same estimates everywhere, as guided null-collision flights read them.
+struct Fixed {
+    inscattered: f32,
+    incident: f32,
+}
+
+impl RadianceCache for Fixed {
+    fn load(&mut self, _: Vec3A, _: f32) -> bool {
+        true
+    }
+    fn incident(&self, _: Vec3A) -> f32 {
+        self.incident
+    }
+    fn mean_radiance(&self) -> f32 {
+        self.inscattered
+    }
+    fn inscattered(&self, _: Vec3A, _: f32) -> f32 {
+        self.inscattered
+    }
+    fn product_hg(&mut self, _: Vec3A, _: f32) -> bool {
+        false
+    }
+    fn product_cosine(&mut self, _: Vec3A) -> bool {
+        false
+    }
+    fn sample(&self, _: Vec2) -> (Vec3A, f32) {
+        (Vec3A::Z, 0.0)
+    }
+    fn pdf(&self, _: Vec3A) -> f32 {
+        0.0
+    }
+}
+
+#[test]
+fn null_collision_guided_weights_stay_bounded_and_unbiased() {
+    // A grey, albedo-1 heterogeneous medium: every weight of standard delta tracking is
+    // exactly 1, so no guided weight may exceed 1 / (1 - alpha), however wrong the cache (a
+    // per-event mixture compounds up to that factor at every null collision). The weighted
+    // pass and scatter events estimate T and 1 - T, against ratio tracking.
+    let medium = medium_of(
+        "type = \"noise\"\nscale = 8\nalbedo = 1\ntransform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }]",
+    );
+    let ray = Ray::new(Vec3A::new(-2.0, 0.1, 0.05), Vec3A::new(1.0, 0.05, 0.02).normalize());
+    let t_max = 4.0;
+    let mut sampler = Sampler::new(17, 0, 0);
+    let mut counters = Counters::default();
+    let reference: MeanEstimate = (0..200_000)
+        .map(|_| {
+            let tr =
+                zerovar::tracking::transmittance(&medium, &ray, t_max, &mut sampler, &mut counters);
+            f64::from(tr.x)
+        })
+        .collect();
+    let alpha = walk::MAX_ALPHA;
+    // (what, in-scattered radiance, radiance arriving along the ray), as null-collision
+    // guiding reads them: a cache that pulls every tentative collision into a scattering, one
+    // that pushes every one through, and a sane one.
+    let caches =
+        [("scatter everywhere", 1e3, 1e-3), ("never scatter", 1e-3, 1e3), ("flat", 1.0, 1.0)];
+    for (what, inscattered, incident) in caches {
+        let mut cache = Fixed { inscattered, incident };
+        let (mut pass, mut scatter) = (MeanEstimate::default(), MeanEstimate::default());
+        let mut largest = 0.0f32;
+        for _ in 0..200_000 {
+            let f = zerovar::guided::distance::guided_flight(
+                &medium,
+                &ray,
+                t_max,
+                Vec3A::ONE,
+                alpha,
+                &mut cache,
+                &mut sampler,
+                &mut counters,
+            );
+            largest = largest.max(f.weight.max_element());
+            let w = f64::from(f.weight.x);
+            let (p, s) = match f.event {
+                GuidedEvent::Pass => (w, 0.0),
+                GuidedEvent::Scatter { .. } => (0.0, w),
+                GuidedEvent::Absorb => (0.0, 0.0),
+            };
+            pass.push(p);
+            scatter.push(s);
+        }
+        assert!(
+            largest <= 1.0 / (1.0 - alpha) * (1.0 + 1e-5),
+            "{what}: weight {largest} exceeds 1 / (1 - alpha)"
+        );
+        // Both means come from independent runs: combine their standard errors.
+        let se = (pass.std_error().powi(2) + reference.std_error().powi(2)).sqrt();
+        let z = (pass.mean - reference.mean) / se;
+        assert!(
+            z.abs() < 4.5,
+            "{what}: passing {} vs T {} (z = {z:.2})",
+            pass.mean,
+            reference.mean
+        );
+        let se = (scatter.std_error().powi(2) + reference.std_error().powi(2)).sqrt();
+        let z = (scatter.mean - (1.0 - reference.mean)) / se;
+        assert!(z.abs() < 4.5, "{what}: scattering {} vs 1 - T (z = {z:.2})", scatter.mean);
     }
 }
 
@@ -295,7 +398,8 @@ resolution = [12, 10]
 type = "noise"
 scale = 8
 albedo = 0.95
-phase = { type = "hg", g = 0.6 }
+# g 0.8: guided directions take the exact product here, the reweighted lobes in FOG.
+phase = { type = "hg", g = 0.8 }
 transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }, { translate = [0, 0.5, 0] }]
 
 [[shapes]]

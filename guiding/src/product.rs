@@ -183,6 +183,36 @@ impl<const N: usize> LobeSet<N> {
         true
     }
 
+    /// Sets this set to the lobes of `base` with lobe `k`'s weight multiplied by
+    /// `factor(mean, kappa)`, renormalised; false (leaving the set unchanged) when no weight
+    /// is left.
+    pub(crate) fn set_reweighted<const M: usize>(
+        &mut self,
+        base: &LobeSet<M>,
+        factor: impl Fn(Vec3, f32) -> f32,
+    ) -> bool {
+        let n = base.len.min(N);
+        let mut total = 0.0f32;
+        for k in 0..n {
+            let w = base.weight[k] * factor(base.mean[k], base.kappa[k]);
+            self.weight[k] = if w > 0.0 && w.is_finite() { w } else { 0.0 };
+            total += self.weight[k];
+        }
+        if !(total > 0.0 && total.is_finite()) {
+            return false;
+        }
+        let inv = 1.0 / total;
+        for k in 0..n {
+            self.mean[k] = base.mean[k];
+            self.kappa[k] = base.kappa[k];
+            self.norm[k] = base.norm[k];
+            self.weight[k] *= inv;
+            self.weighted_norm[k] = self.weight[k] * self.norm[k];
+        }
+        self.len = n;
+        true
+    }
+
     fn set_factor(&mut self, factor: &[(Vec3, f32, f32)]) {
         let total: f32 = factor.iter().map(|f| f.2.max(0.0)).sum();
         if !(total > 0.0 && total.is_finite()) {

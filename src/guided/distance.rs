@@ -444,6 +444,14 @@ pub fn guided_flight(
 }
 
 /// Guided flight in the null-collision form through a heterogeneous medium over `(t0, t1)`.
+///
+/// The mixture with standard tracking is one-sample over the whole flight, as in homogeneous
+/// media: the strategy is drawn once, and every event is weighted by the prefix's mixture
+/// density `alpha P_guided + (1 - alpha) P_std` (products of the per-event probabilities).
+/// Mixing event by event instead lets each null collision multiply the weight by up to
+/// `1 / (1 - alpha)`; over a long flight that compounds into rare, huge weights (measured:
+/// a cloud at g 0.8 missed its mean by 8.7 standard errors at 1024 spp). This way no weight
+/// exceeds `1 / (1 - alpha)` times the standard tracker's.
 #[allow(clippy::too_many_arguments)]
 fn null_collision_flight(
     medium: &Medium,
@@ -458,16 +466,27 @@ fn null_collision_flight(
     counters: &mut Counters,
 ) -> GuidedFlight {
     let emissive = medium.is_emissive();
+    let guided = alpha > 0.0 && sampler.next_1d() < alpha;
     // Cache estimates are refreshed every 1 / SEGMENTS of the stretch: regions are coarser than
     // the spacing of tentative collisions, and a lookup costs far more than a density lookup.
     let refresh = (t1 - t0) / SEGMENTS as f32;
     let mut cached: Option<(f32, f32, f32)> = None; // (t of lookup, L_s, L)
-    let mut weight = Spectrum::ONE;
+    // The standard tracker's weight of the prefix, and its guided probability over its
+    // standard one: the prefix's weight is `standard / (alpha ratio + 1 - alpha)`.
+    let mut standard = Spectrum::ONE;
+    let mut ratio = 1.0f32;
+    let mixture = |standard: Spectrum, ratio: f32| {
+        let w = standard / (alpha * ratio + (1.0 - alpha));
+        // A ratio that overflowed means the standard tracker could (all but) never have made
+        // this prefix: its weight is zero, never NaN.
+        if w.is_finite() { w } else { Spectrum::ZERO }
+    };
     let mut emitted = Spectrum::ZERO;
     let mut t = t0;
     loop {
         t += crate::tracking::unit_exponential(sampler.next_1d()) / majorant;
         if t >= t1 {
+            let weight = mixture(standard, ratio);
             return GuidedFlight { event: GuidedEvent::Pass, weight, emitted };
         }
         let x = ray.at(t);
@@ -476,9 +495,10 @@ fn null_collision_flight(
         counters.guided_density_lookups += 1;
         let sigma_s = c.sigma_t * c.albedo;
         let sigma_n = (Spectrum::splat(majorant) - c.sigma_t).max(Spectrum::ZERO);
-        let path = beta * weight;
+        let path = beta * standard;
         if emissive {
-            emitted += path * (c.sigma_t - sigma_s) * medium.emission / majorant;
+            let prefix = beta * mixture(standard, ratio);
+            emitted += prefix * (c.sigma_t - sigma_s) * medium.emission / majorant;
         }
         // Standard choice: history-aware spectral tracking (delta tracking when grey).
         let (ps, pn) = (luminance(path * sigma_s), luminance(path * sigma_n));
@@ -486,7 +506,7 @@ fn null_collision_flight(
             return GuidedFlight { event: GuidedEvent::Absorb, weight: Spectrum::ZERO, emitted };
         }
         let p_std = ps / (ps + pn);
-        let mut p_scatter = p_std;
+        let mut p_guided = p_std;
         if alpha > 0.0 && ps > 0.0 && pn > 0.0 {
             if cached.is_none_or(|(at, _, _)| t - at > refresh) {
                 counters.field_lookups += 1;
@@ -496,16 +516,19 @@ fn null_collision_flight(
                 let (a, b) = (ps * ls, pn * li);
                 if a + b > 0.0 && (a + b).is_finite() {
                     // Bounded away from 0 and 1, so neither event loses support.
-                    let zv = (a / (a + b)).clamp(0.02, 0.98);
-                    p_scatter = alpha * zv + (1.0 - alpha) * p_std;
+                    p_guided = (a / (a + b)).clamp(0.02, 0.98);
                 }
             }
         }
-        if sampler.next_1d() < p_scatter {
-            weight *= sigma_s / (majorant * p_scatter);
+        let p = if guided { p_guided } else { p_std };
+        if sampler.next_1d() < p {
+            standard *= sigma_s / (majorant * p_std);
+            ratio *= p_guided / p_std;
+            let weight = mixture(standard, ratio);
             return GuidedFlight { event: GuidedEvent::Scatter { t }, weight, emitted };
         }
-        weight *= sigma_n / (majorant * (1.0 - p_scatter));
+        standard *= sigma_n / (majorant * (1.0 - p_std));
+        ratio *= (1.0 - p_guided) / (1.0 - p_std);
     }
 }
 

@@ -10,7 +10,7 @@
 
 use crate::bsdf::Bsdf;
 use crate::guided::distance::{GuidedEvent, guided_flight};
-use crate::guided::{Components, PRODUCT_MIN_G, RadianceCache, window};
+use crate::guided::{Components, EXACT_PRODUCT_MIN_G, PRODUCT_MIN_G, RadianceCache, window};
 use crate::lights::Light;
 use crate::math::{Frame, Ray, Spectrum, luminance, positive, power_heuristic};
 use crate::rng::Sampler;
@@ -176,7 +176,11 @@ fn walk<C: RadianceCache>(
                 let loaded = guide.any() && ctx.cache.load(p, sampler.next_1d());
                 let product = guide.directions && loaded && ctx.cache.product_hg(dir, g);
                 counters.field_lookups += u64::from(loaded);
-                counters.products += u64::from(product && g.abs() >= PRODUCT_MIN_G);
+                if product && g.abs() >= EXACT_PRODUCT_MIN_G {
+                    counters.products += 1;
+                } else if product && g.abs() >= PRODUCT_MIN_G {
+                    counters.reweighted_products += 1;
+                }
                 // The phase function's value towards `wi` and the density of drawing `wi`.
                 let phase_and_pdf = |cache: &C, wi: Vec3A| {
                     let pp = phase.eval(dir, wi);

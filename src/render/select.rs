@@ -34,6 +34,7 @@ const NS_PER_DENSITY_LOOKUP: f64 = 168.0;
 const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 58.0;
 const NS_PER_FIELD_LOOKUP: f64 = 125.0;
 const NS_PER_PRODUCT: f64 = 1359.0;
+const NS_PER_REWEIGHTED_PRODUCT: f64 = 400.0;
 
 /// What the pilot of adaptive guiding decided.
 #[derive(Clone, Debug, Serialize)]
@@ -61,6 +62,7 @@ pub(crate) fn cost(c: &Counters) -> f64 {
         + NS_PER_GUIDED_DENSITY_LOOKUP * c.guided_density_lookups as f64
         + NS_PER_FIELD_LOOKUP * c.field_lookups as f64
         + NS_PER_PRODUCT * c.products as f64
+        + NS_PER_REWEIGHTED_PRODUCT * c.reweighted_products as f64
 }
 
 /// Runs the pilot with `guidance`'s field; returns which tiles to guide, or `None` when the
