@@ -3,7 +3,7 @@
 # and Mitsuba 3's volpath on the same scene (scenes/bench/<scene>.xml) at the same time.
 # Usage: bench/run.sh [SECONDS_PER_METHOD] [REFERENCE_SECONDS]   (defaults 20 and 120)
 # Writes bench/out/<scene>/ (tables, images), bench/RESULTS.md (a summary, every table, the
-# machine, the date) and bench/plots/ (each scene's convergence plot and image strip, which
+# machine, the date) and bench/plots/ (each scene's convergence plot, image strip and crops, which
 # RESULTS.md shows). References are kept between runs while the scene file is unchanged (its
 # SHA-256 is kept beside the reference); delete bench/out to redo them all.
 # The Mitsuba 3 column needs `import mitsuba` to work (pip install mitsuba); without it the
@@ -50,6 +50,7 @@ for scene in scenes/bench/*.toml; do
   $bin compare "$scene" --reference "$out/reference.exr" --time "$budget" --out "$out" --trim 0.0001 >/dev/null
   cp "$out/convergence.svg" "bench/plots/$name-convergence.svg"
   cp "$out/strip.png" "bench/plots/$name-strip.png"
+  cp "$out/crops.png" "bench/plots/$name-crops.png"
   rm -f "$out/mitsuba.json" "$out/mitsuba.log"
   xml=scenes/bench/$name.xml
   if [ "$mitsuba" = 1 ]; then
@@ -73,7 +74,9 @@ for scene in scenes/bench/*.toml; do
     echo
     echo "![convergence](plots/$name-convergence.svg)"; echo
     echo "Reference, then each method in table order:"; echo
-    echo "![images](plots/$name-strip.png)"
+    echo "![images](plots/$name-strip.png)"; echo
+    echo "Magnified where unguided has the most error (same order):"; echo
+    echo "![crops](plots/$name-crops.png)"
   } >> "$details"
 done
 # The headline: each scene's final checkpoint, the first method against the others (and

@@ -239,6 +239,8 @@ fn trains_a_field_and_renders_with_it() {
         (vec!["--guiding", "sideways"], "--guiding sideways"),
         (vec!["--guiding", "full", "--alpha", "1.5"], "--alpha 1.5"),
         (vec!["--guiding", "full", "--train-passes", "0"], "--train-passes 0"),
+        // A field with nothing to guide would be loaded for nothing.
+        (vec!["--guiding", "off", "--field", f], "--guiding off: rendering with --field"),
     ] {
         let o = zerovar(&[&["render", s, "-o", e, "--quiet"][..], &args].concat());
         assert!(!o.status.success() && stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
@@ -282,6 +284,7 @@ fn reference_and_compare_end_to_end() {
         "a-error.png",
         "g.exr",
         "strip.png",
+        "crops.png",
         "convergence.png",
         "convergence.svg",
     ] {
@@ -317,6 +320,14 @@ fn reference_and_compare_end_to_end() {
         "{}",
         stderr(&o)
     );
+    for bad in ["6,0,4,4", "0,0,0,2", "1,2,3", "a,b,c,d"] {
+        let o = zerovar(&["compare", s, "--reference", r, "--spp", "1", "--out", d, "--crop", bad]);
+        assert!(
+            !o.status.success() && stderr(&o).contains(&format!("--crop {bad}")),
+            "{bad}: {}",
+            stderr(&o)
+        );
+    }
     let o =
         zerovar(&["compare", s, "--reference", "/nonexistent/ref.exr", "--spp", "1", "--out", d]);
     assert!(!o.status.success() && stderr(&o).contains("/nonexistent/ref.exr"), "{}", stderr(&o));

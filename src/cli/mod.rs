@@ -6,7 +6,6 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
-use zerovar::guided::Components;
 use zerovar::guided::TrainedField;
 use zerovar::output::{ImageMetadata, write_exr, write_png};
 use zerovar::render::{
@@ -89,6 +88,10 @@ struct CompareArgs {
     /// Fraction of worst pixels dropped from each metric.
     #[arg(long, default_value_t = 0.0)]
     trim: f64,
+    /// The window of `crops.png`, as X,Y,WIDTH,HEIGHT in pixels [default: a quarter of the
+    /// image in each direction, where the first method's relative error is largest].
+    #[arg(long, value_name = "X,Y,W,H")]
+    crop: Option<String>,
     /// Seed of the methods' renders [default: the scene's].
     #[arg(long)]
     seed: Option<u64>,
@@ -100,9 +103,10 @@ struct CompareArgs {
 #[derive(Args)]
 struct GuidingArgs {
     /// Guided decisions: off, directions, distances, rr, full, or a +-joined list
-    /// (e.g. directions+rr); auto is full guiding in the tiles where a pilot finds it pays.
-    #[arg(long, default_value = "off", value_name = "MODE")]
-    guiding: String,
+    /// (e.g. directions+rr); auto is full guiding in the tiles where a pilot finds it pays
+    /// [default: off; full for `train` and with --field].
+    #[arg(long, value_name = "MODE")]
+    guiding: Option<String>,
     /// Probability of the guided strategy in each mixture with standard sampling, in [0, 1]
     /// (used up to 0.8: standard sampling always keeps 20%, which bounds every weight).
     #[arg(long, default_value_t = 0.5)]
@@ -307,6 +311,7 @@ fn run_compare(a: CompareArgs) -> Result<()> {
             a.reference.display()
         );
     }
+    let crop = a.crop.as_deref().map(|c| parse_crop(c, w as usize, h as usize)).transpose()?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
     let results = run(&mut scene, &reference, &methods, budget, a.trim, &|m, c| {
@@ -346,8 +351,92 @@ fn run_compare(a: CompareArgs) -> Result<()> {
         strip_w += w as usize;
     }
     write_png(&a.out.join("strip.png"), strip_w as u32, h, &strip, 0.0)?;
+    let images: Vec<&[[f32; 3]]> =
+        std::iter::once(&reference[..]).chain(results.iter().map(|r| &r.image[..])).collect();
+    let window = crop.unwrap_or_else(|| {
+        let first = results.first().map_or(&reference[..], |r| &r.image[..]);
+        noisiest_window(first, &reference, w as usize, h as usize)
+    });
+    let (cw, ch, crops) = crops(&images, w as usize, window);
+    write_png(&a.out.join("crops.png"), cw as u32, ch as u32, &crops, 0.0)?;
     eprintln!("wrote {}", a.out.display());
     Ok(())
+}
+
+/// Parses `--crop X,Y,W,H` and checks the window lies inside the `w` x `h` image.
+fn parse_crop(text: &str, w: usize, h: usize) -> Result<CropWindow> {
+    let v: Vec<usize> =
+        text.split(',').map(|p| p.trim().parse()).collect::<Result<_, _>>().map_err(|_| {
+            anyhow::anyhow!("--crop {text}: give X,Y,WIDTH,HEIGHT as four whole numbers of pixels")
+        })?;
+    let [x, y, cw, ch] = v[..] else {
+        bail!("--crop {text}: give X,Y,WIDTH,HEIGHT as four whole numbers of pixels");
+    };
+    if cw == 0 || ch == 0 || x + cw > w || y + ch > h {
+        bail!("--crop {text}: the window must be non-empty and inside the {w}x{h} image");
+    }
+    Ok(CropWindow { x, y, w: cw, h: ch })
+}
+
+/// A rectangle of pixels.
+#[derive(Clone, Copy, Debug)]
+struct CropWindow {
+    x: usize,
+    y: usize,
+    w: usize,
+    h: usize,
+}
+
+/// The window, a quarter of the image in each direction on an 8-pixel grid, where `image`'s
+/// mean relative squared error against `reference` is largest; each pixel's error is capped
+/// at 1 so that a single firefly does not choose the window.
+fn noisiest_window(image: &[[f32; 3]], reference: &[[f32; 3]], w: usize, h: usize) -> CropWindow {
+    let (cw, ch) = ((w / 4).max(1), (h / 4).max(1));
+    let err: Vec<f64> = image
+        .iter()
+        .zip(reference)
+        .map(|(a, r)| {
+            let (a, r) = (lum(a), lum(r));
+            let e = (a - r) * (a - r) / (r * r + zerovar::metrics::EPSILON);
+            if e.is_finite() { e.min(1.0) } else { 1.0 }
+        })
+        .collect();
+    let mut best = (f64::NEG_INFINITY, CropWindow { x: 0, y: 0, w: cw, h: ch });
+    for y in (0..=h - ch).step_by(8) {
+        for x in (0..=w - cw).step_by(8) {
+            let total: f64 =
+                (y..y + ch).map(|yy| err[yy * w + x..yy * w + x + cw].iter().sum::<f64>()).sum();
+            if total > best.0 {
+                best = (total, CropWindow { x, y, w: cw, h: ch });
+            }
+        }
+    }
+    best.1
+}
+
+fn lum(p: &[f32; 3]) -> f64 {
+    f64::from(zerovar::math::luminance(glam::Vec3A::from_array(*p)))
+}
+
+/// The `window` of each `w`-wide image, magnified so the strip is at least 720 pixels wide,
+/// side by side with a 2-pixel gap; returns its width, height and pixels.
+fn crops(images: &[&[[f32; 3]]], w: usize, window: CropWindow) -> (usize, usize, Vec<[f32; 3]>) {
+    const GAP: usize = 2;
+    let n = images.len();
+    let scale = (720 / (n * window.w).max(1)).clamp(1, 8);
+    let (cw, ch) = (window.w * scale, window.h * scale);
+    let width = n * cw + (n - 1) * GAP;
+    let mut out = vec![[1.0f32; 3]; width * ch];
+    for (i, img) in images.iter().enumerate() {
+        let x0 = i * (cw + GAP);
+        for y in 0..ch {
+            for x in 0..cw {
+                let src = (window.y + y / scale) * w + window.x + x / scale;
+                out[y * width + x0 + x] = img[src];
+            }
+        }
+    }
+    (width, ch, out)
 }
 
 /// Two row-major images of equal height placed left and right.
@@ -365,16 +454,21 @@ fn side_by_side(
         .collect()
 }
 
-/// Validates guiding arguments; `default_full` makes `off` mean everything (for `train`).
-fn validate_guiding(a: &GuidingArgs, default_full: bool) -> Result<GuidingOptions> {
-    let Some((mut components, adaptive)) = parse_guiding(&a.guiding) else {
+/// Validates guiding arguments. `field_use` names what needs a field (`train`, or rendering
+/// with `--field`): there guiding defaults to full, and `off` is an error.
+fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingOptions> {
+    let text = a.guiding.as_deref().unwrap_or(if field_use.is_some() { "full" } else { "off" });
+    let Some((components, adaptive)) = parse_guiding(text) else {
         bail!(
-            "--guiding {}: use off, directions, distances, rr, full, auto, or a +-joined list",
-            a.guiding
+            "--guiding {text}: use off, directions, distances, rr, full, auto, or a +-joined list"
         );
     };
-    if default_full && !components.any() {
-        components = Components::FULL;
+    if let Some(what) = field_use
+        && !components.any()
+    {
+        bail!(
+            "--guiding {text}: {what} needs something guided; give full (the default there), directions, distances, rr or a +-joined list"
+        );
     }
     if !(0.0..=1.0).contains(&a.alpha) {
         bail!("--alpha {}: give a probability in [0, 1]", a.alpha);
@@ -393,7 +487,7 @@ fn validate_guiding(a: &GuidingArgs, default_full: bool) -> Result<GuidingOption
 }
 
 fn run_train(a: TrainArgs) -> Result<()> {
-    let guiding = validate_guiding(&a.guiding, true)?;
+    let guiding = validate_guiding(&a.guiding, Some("training a field"))?;
     if a.threads == Some(0) {
         bail!("--threads 0: give at least one thread, or leave it out to use every core");
     }
@@ -474,7 +568,8 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
     {
         bail!("-o {}: the directory {} does not exist", output.display(), dir.display());
     }
-    let guiding = validate_guiding(&a.guiding, a.field.is_some())?;
+    let guiding =
+        validate_guiding(&a.guiding, a.field.is_some().then_some("rendering with --field"))?;
     let guiding = GuidingOptions { combine_training: a.combine_training, ..guiding };
     if let Some(f) = &a.field
         && !f.is_file()
@@ -589,4 +684,42 @@ fn progress_bar(visible: bool) -> ProgressBar {
         .expect("the template is valid"),
     );
     bar
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_crop_window_is_where_the_error_is() {
+        let (w, h) = (64, 48);
+        let reference = vec![[0.5f32; 3]; w * h];
+        let mut image = reference.clone();
+        // Noise in the block at (40, 24) of 16 x 12 (a quarter of the image each way), and one
+        // firefly elsewhere, which must not win because each pixel's error is capped.
+        for y in 24..36 {
+            for x in 40..56 {
+                image[y * w + x] = if (x + y) % 2 == 0 { [0.9; 3] } else { [0.1; 3] };
+            }
+        }
+        image[3 * w + 3] = [1e6; 3];
+        let c = noisiest_window(&image, &reference, w, h);
+        assert_eq!((c.x, c.y, c.w, c.h), (40, 24, 16, 12));
+        // Crops of two images side by side, magnified, with the gap between them.
+        let (cw, ch, pixels) = crops(&[&reference, &image], w, c);
+        let scale = 720 / (2 * 16);
+        assert_eq!((cw, ch), (2 * 16 * scale.min(8) + 2, 12 * scale.min(8)));
+        assert_eq!(pixels.len(), cw * ch);
+        assert_eq!(pixels[0], [0.5; 3]);
+        assert_eq!(pixels[cw - 1], image[24 * w + 55]);
+    }
+
+    #[test]
+    fn crop_windows_outside_the_image_are_refused() {
+        assert!(parse_crop("0,0,8,6", 8, 6).is_ok());
+        for bad in ["1,0,8,6", "0,0,0,1", "0,0,1", "x,0,1,1", "-1,0,1,1"] {
+            let e = parse_crop(bad, 8, 6).unwrap_err().to_string();
+            assert!(e.contains(&format!("--crop {bad}")), "{bad}: {e}");
+        }
+    }
 }

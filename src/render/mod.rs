@@ -499,6 +499,12 @@ fn final_phase(
     } else {
         VolPath::from_scene(scene).settings()
     };
+    // Without training images (a loaded field), weight windows centre on the image rendered
+    // so far, renewed after each pass: each pass's windows then depend only on earlier passes'
+    // independent samples, so every pass stays unbiased.
+    let own_estimate =
+        guidance.as_ref().is_some_and(|g| g.estimate.is_none()) && settings.guide.roulette;
+    let mut estimate: Option<Vec<f32>> = None;
     let pass = |first: u32, count: u32| Pass {
         settings: &settings,
         seed: options.seed,
@@ -525,12 +531,16 @@ fn final_phase(
                     let d = finished.fetch_add(n, Ordering::Relaxed) + n;
                     progress.report(d, total);
                 };
-                let Some(out) = render_pass(scene, pass(done, batch), &mut film, progress, &report)
-                else {
+                let mut this = pass(done, batch);
+                this.estimate = this.estimate.or(estimate.as_deref());
+                let Some(out) = render_pass(scene, this, &mut film, progress, &report) else {
                     break;
                 };
                 counters += out.counters;
                 done += batch;
+                if own_estimate {
+                    estimate = pixel_estimates(std::slice::from_ref(&film));
+                }
             }
         }
         Budget::Time(limit) => {
@@ -538,12 +548,16 @@ fn final_phase(
             let mut batch = 1u32;
             loop {
                 let pass_start = Instant::now();
-                let Some(out) = render_pass(scene, pass(done, batch), &mut film, progress, &|_| {})
-                else {
+                let mut this = pass(done, batch);
+                this.estimate = this.estimate.or(estimate.as_deref());
+                let Some(out) = render_pass(scene, this, &mut film, progress, &|_| {}) else {
                     break;
                 };
                 counters += out.counters;
                 done += batch;
+                if own_estimate {
+                    estimate = pixel_estimates(std::slice::from_ref(&film));
+                }
                 let elapsed = start.elapsed();
                 progress.report((elapsed.as_millis() as u64).min(total), total);
                 if progress.stopped() {
