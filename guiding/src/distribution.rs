@@ -114,7 +114,7 @@ impl VolumeDistribution {
 
     /// Replaces the distribution by the incident-radiance mixture with each lobe's weight
     /// multiplied by the lobe's convolution with the Henyey-Greenstein phase function, the
-    /// lobes' shapes kept: an approximate product with the phase function at a quarter of the
+    /// lobes' shapes kept: an approximate product with the phase function at a third of the
     /// cost of [`apply_hg_product`] (one phase evaluation per lobe instead of
     /// [`HG_LOBES`] lobe products, and a mixture of the region's size to sample and evaluate).
     /// The convolution is taken as HG with `g` times the lobe's mean cosine, which is exact
