@@ -531,6 +531,64 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
 }
 
 #[test]
+fn adaptive_guiding_stops_training_early_where_guiding_cannot_pay() {
+    // Thin haze under a uniform sky: nothing for guiding to find. After two training passes
+    // the early pilot chooses no tile, training stops, and the render is the unguided one,
+    // sample for sample.
+    let s = scene(
+        r#"
+[camera]
+origin = [0, 1, 4]
+target = [0, 0.8, 0]
+fov = 40
+resolution = [48, 36]
+
+[media.haze]
+type = "homogeneous"
+sigma_t = 0.3
+albedo = 0.8
+
+[[shapes]]
+type = "sphere"
+center = [0, 1, 0]
+bsdf = { type = "null" }
+interior = "haze"
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 5 }]
+
+[[lights]]
+type = "constant"
+radiance = 1
+"#,
+    );
+    let guiding = GuidingOptions {
+        components: Components::FULL,
+        train: TrainBudget::Passes(5),
+        adaptive: true,
+        ..GuidingOptions::default()
+    };
+    let options = RenderOptions { budget: Budget::Samples(16), seed: 3, threads: None, guiding };
+    let auto = render(&s, &options, &|_, _| true).unwrap();
+    let selection = auto.selection.expect("adaptive guiding reports its choice");
+    assert!(selection.stopped_training, "training went on: gain {}", selection.gain);
+    assert_eq!(selection.guided_tiles, 0);
+    assert!(selection.gain < 1.02, "gain {}", selection.gain);
+    assert_eq!(auto.training.expect("the early passes").passes, 2);
+    let off = RenderOptions { guiding: GuidingOptions::default(), ..options };
+    let unguided = render(&s, &off, &|_, _| true).unwrap();
+    assert_eq!(auto.image, unguided.image);
+    // The cloud: with this seed the early pilot finds guiding pays (one tile, so its 2 spp
+    // decide by chance: seed 3 stops early), and training goes on to its end.
+    let options = RenderOptions { seed: 7, ..options };
+    let auto = render(&scene(CLOUD), &options, &|_, _| true).unwrap();
+    let selection = auto.selection.unwrap();
+    assert!(!selection.stopped_training && selection.guided_tiles == 1, "{selection:?}");
+    assert_eq!(auto.training.unwrap().passes, 5);
+}
+
+#[test]
 fn a_loaded_field_with_windows_on_the_image_so_far_converges_to_the_unguided_image() {
     // A saved field has no training images: weight windows centre on the render's own image
     // of the passes before, which depends only on samples independent of the current pass.

@@ -202,7 +202,7 @@ pub struct TrainingReport {
     pub passes: u32,
     /// Samples per pixel over all passes.
     pub spp: u32,
-    /// Seconds spent training (rendering and updating).
+    /// Seconds spent training (rendering and updating; with adaptive guiding, its early pilot).
     pub seconds: f64,
     /// Training samples the field learned from.
     pub samples: u64,
@@ -268,7 +268,15 @@ pub fn render(
         if !options.guiding.components.any() {
             return Ok(final_phase(scene, options, None, Vec::new(), threads, progress, None));
         }
-        let (field, direct, films, report) = train_in_pool(scene, options, progress)?;
+        let mut training = Training::new(options)?;
+        if options.guiding.adaptive {
+            training.run(scene, options, progress, EARLY_PILOT_PASSES)?;
+            if let Some(result) = early_pilot(scene, options, &mut training, threads, progress) {
+                return Ok(result);
+            }
+        }
+        training.run(scene, options, progress, u32::MAX)?;
+        let (field, direct, films, report) = training.finish();
         let guidance = Guidance {
             field: &field,
             direct: Some(&direct),
@@ -277,6 +285,57 @@ pub fn render(
         };
         Ok(guided_phase(scene, options, guidance, films, threads, progress, Some(report)))
     })
+}
+
+/// Training passes after which adaptive guiding first pilots the field (1 + 2 spp).
+const EARLY_PILOT_PASSES: u32 = 2;
+/// Least modelled gain of the early pilot's choice for training to go on. The field after
+/// two passes is poorer than after training, so the early gain understates the final one
+/// (`--stats`, image-wide efficiency of guiding every tile after 2 and 5 passes: light shaft
+/// 1.03 and 1.46, occluded light 1.8 and 4.5), and it is noisy (the light shaft's early
+/// choice gained 1.08 with seed 0); where guiding cannot pay (the easy haze, the chromatic
+/// slab) the early pilot chose no tile at all (gain exactly 1) with every seed tried. So only
+/// a choice of next to nothing stops training.
+const EARLY_MIN_GAIN: f64 = 1.02;
+
+/// Adaptive guiding's early look: after a short training, a pilot judges whether guiding
+/// can pay anywhere; if not, training stops and the rest of its budget (and the render's)
+/// goes to unguided sampling. `None` means training goes on, the pilot's time counted as
+/// training's.
+fn early_pilot(
+    scene: &Scene,
+    options: &RenderOptions,
+    training: &mut Training,
+    threads: usize,
+    progress: &Monitor<'_>,
+) -> Option<RenderResult> {
+    if training.done {
+        return None; // nothing left to save: the ordinary pilot decides
+    }
+    let guidance = training.guidance();
+    let last_pass = 1 << (EARLY_PILOT_PASSES - 1);
+    let (_, selection) = select::pilot(scene, options, &guidance, last_pass, progress)?;
+    if selection.gain >= EARLY_MIN_GAIN {
+        training.seconds += selection.seconds;
+        return None;
+    }
+    let mut options = options.clone();
+    if let Budget::Time(t) = options.budget {
+        // The whole budget is what the caller pays for: the pilot's time comes out of it,
+        // and training time not spent goes to the render.
+        let unused = match options.guiding.train {
+            TrainBudget::Time(tt) => (tt.as_secs_f64() - training.seconds).max(0.0),
+            TrainBudget::Passes(_) => 0.0,
+        };
+        let left = (t.as_secs_f64() + unused - selection.seconds).max(0.0);
+        options.budget = Budget::Time(Duration::from_secs_f64(left));
+    }
+    let films = training.films.clone();
+    let mut result =
+        final_phase(scene, &options, None, films, threads, progress, Some(training.report()));
+    result.seconds += selection.seconds;
+    result.selection = Some(Selection { guided_tiles: 0, stopped_training: true, ..selection });
+    Some(result)
 }
 
 /// Renders `scene` guided by a field trained earlier (no training phase).
@@ -345,65 +404,122 @@ fn train_in_pool(
     options: &RenderOptions,
     progress: &Monitor<'_>,
 ) -> Result<(Field, DirectFluence, Vec<Film>, TrainingReport), RenderError> {
-    let start = Instant::now();
-    let mut field = Field::new(options.guiding.field.clone())?;
-    let settings = walk_settings(scene, options);
-    let [w, h] = scene.camera.resolution();
-    let mut films = Vec::new();
-    let mut direct = DirectFluence::default();
-    let (mut spp, mut samples_total) = (0u32, 0u64);
-    let (passes, limit) = match options.guiding.train {
-        TrainBudget::Passes(n) => (n, None),
-        TrainBudget::Time(t) => (u32::MAX, Some(t)),
-    };
-    let total = match options.guiding.train {
-        TrainBudget::Passes(n) => ((1u64 << n.min(30)) - 1) * (w * h) as u64,
-        TrainBudget::Time(t) => t.as_millis() as u64,
-    };
-    for pass in 0..passes.min(20) {
-        let count = 1u32 << pass;
-        let mut film = Film::new(w, h);
-        let estimate = pixel_estimates(&films);
-        // Each pass draws from its own streams, independent of the render phase's.
-        let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
-        let pass_start = Instant::now();
-        let spec = Pass {
-            settings: &settings,
-            seed,
-            first: 0,
-            count,
-            field: Some((&field, Some(&direct))),
-            estimate: estimate.as_deref(),
-            record: true,
-            guided_tiles: None,
+    let mut training = Training::new(options)?;
+    training.run(scene, options, progress, u32::MAX)?;
+    Ok(training.finish())
+}
+
+/// A training phase that can stop after some passes and resume (adaptive guiding's early
+/// look at whether guiding can pay).
+struct Training {
+    field: Field,
+    direct: DirectFluence,
+    films: Vec<Film>,
+    spp: u32,
+    samples: u64,
+    /// Seconds spent in training passes and in adaptive guiding's early pilot.
+    seconds: f64,
+    /// Whether the budget is spent.
+    done: bool,
+}
+
+impl Training {
+    fn new(options: &RenderOptions) -> Result<Self, RenderError> {
+        Ok(Self {
+            field: Field::new(options.guiding.field.clone())?,
+            direct: DirectFluence::default(),
+            films: Vec::new(),
+            spp: 0,
+            samples: 0,
+            seconds: 0.0,
+            done: false,
+        })
+    }
+
+    /// Runs passes until `until` passes are done or the training budget is spent.
+    fn run(
+        &mut self,
+        scene: &Scene,
+        options: &RenderOptions,
+        progress: &Monitor<'_>,
+        until: u32,
+    ) -> Result<(), RenderError> {
+        let settings = walk_settings(scene, options);
+        let [w, h] = scene.camera.resolution();
+        let (passes, limit) = match options.guiding.train {
+            TrainBudget::Passes(n) => (n, None),
+            TrainBudget::Time(t) => (u32::MAX, Some(t.as_secs_f64())),
         };
-        let Some(out) = render_pass(scene, spec, &mut film, progress, &|_| {}) else {
-            return Err(RenderError::Cancelled);
+        let total = match options.guiding.train {
+            TrainBudget::Passes(n) => ((1u64 << n.min(30)) - 1) * (w * h) as u64,
+            TrainBudget::Time(t) => t.as_millis() as u64,
         };
-        field.update(&out.samples)?;
-        direct = DirectFluence::build(&field, &out.records);
-        samples_total += out.samples.len() as u64;
-        spp += count;
-        films.push(film);
-        match limit {
-            None => progress.report(((1u64 << (pass + 1)) - 1) * (w * h) as u64, total),
-            Some(t) => {
-                progress.report((start.elapsed().as_millis() as u64).min(total), total);
-                // Stop when the next pass (twice as long) would overrun the budget.
-                if start.elapsed() + pass_start.elapsed() * 2 > t {
-                    break;
+        let last = passes.min(20);
+        while !self.done && (self.films.len() as u32) < until.min(last) {
+            let pass = self.films.len() as u32;
+            let count = 1u32 << pass;
+            let mut film = Film::new(w, h);
+            let estimate = pixel_estimates(&self.films);
+            // Each pass draws from its own streams, independent of the render phase's.
+            let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
+            let pass_start = Instant::now();
+            let spec = Pass {
+                settings: &settings,
+                seed,
+                first: 0,
+                count,
+                field: Some((&self.field, Some(&self.direct))),
+                estimate: estimate.as_deref(),
+                record: true,
+                guided_tiles: None,
+            };
+            let Some(out) = render_pass(scene, spec, &mut film, progress, &|_| {}) else {
+                return Err(RenderError::Cancelled);
+            };
+            self.field.update(&out.samples)?;
+            self.direct = DirectFluence::build(&self.field, &out.records);
+            self.samples += out.samples.len() as u64;
+            self.spp += count;
+            self.films.push(film);
+            let pass_seconds = pass_start.elapsed().as_secs_f64();
+            self.seconds += pass_seconds;
+            self.done = pass + 1 >= last;
+            match limit {
+                None => progress.report(((1u64 << (pass + 1)) - 1) * (w * h) as u64, total),
+                Some(t) => {
+                    progress.report(((self.seconds * 1000.0) as u64).min(total), total);
+                    // Stop when the next pass (twice as long) would overrun the budget.
+                    self.done |= self.seconds + pass_seconds * 2.0 > t;
                 }
             }
         }
+        Ok(())
     }
-    let report = TrainingReport {
-        passes: films.len() as u32,
-        spp,
-        seconds: start.elapsed().as_secs_f64(),
-        samples: samples_total,
-        field: field.stats(),
-    };
-    Ok((field, direct, films, report))
+
+    /// The field so far, as the render phase would use it.
+    fn guidance(&self) -> Guidance<'_> {
+        Guidance {
+            field: &self.field,
+            direct: Some(&self.direct),
+            estimate: pixel_estimates(&self.films),
+            guided_tiles: None,
+        }
+    }
+
+    fn report(&self) -> TrainingReport {
+        TrainingReport {
+            passes: self.films.len() as u32,
+            spp: self.spp,
+            seconds: self.seconds,
+            samples: self.samples,
+            field: self.field.stats(),
+        }
+    }
+
+    fn finish(self) -> (Field, DirectFluence, Vec<Film>, TrainingReport) {
+        let report = self.report();
+        (self.field, self.direct, self.films, report)
+    }
 }
 
 /// Per-pixel luminance estimates from the training films: the mean over all their samples,

@@ -52,6 +52,12 @@ pub struct Selection {
     pub cost_ratio: f64,
     /// Relative variance of a guided sample over an unguided one, over the whole image.
     pub variance_ratio: f64,
+    /// Modelled efficiency of the image with the chosen tiles guided over the image all
+    /// unguided (relative variance times cost, inverted).
+    pub gain: f64,
+    /// Whether this pilot ran early in training and found too little `gain` to go on: the
+    /// rest of the training budget was rendered unguided.
+    pub stopped_training: bool,
 }
 
 /// The modelled cost of the work `c` counts, in nanoseconds of one thread.
@@ -148,6 +154,14 @@ pub(super) fn pilot(
         sum(|m| m.unguided_cost),
     ];
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
+    let chosen = measured.iter().zip(&choice).fold((0.0, 0.0), |(v, c), (m, &g)| {
+        if g {
+            (v + m.guided_variance, c + m.guided_cost)
+        } else {
+            (v + m.unguided_variance, c + m.unguided_cost)
+        }
+    });
+    let gain = ratio(totals[1] * totals[3], chosen.0 * chosen.1);
     let selection = Selection {
         tiles: choice.len(),
         guided_tiles: choice.iter().filter(|&&g| g).count(),
@@ -155,6 +169,9 @@ pub(super) fn pilot(
         seconds: start.elapsed().as_secs_f64(),
         cost_ratio: ratio(totals[2], totals[3]),
         variance_ratio: ratio(totals[0], totals[1]),
+        // A black image (no variance either way) gains nothing.
+        gain: if gain.is_finite() { gain } else { 1.0 },
+        stopped_training: false,
     };
     Some((choice, selection))
 }
