@@ -184,8 +184,8 @@ impl<const N: usize> LobeSet<N> {
     }
 
     /// Sets this set to the lobes of `base` with lobe `k`'s weight multiplied by
-    /// `factor(mean, kappa)`, renormalised; false (leaving the set unchanged) when no weight
-    /// is left.
+    /// `factor(mean, kappa)`, renormalised. Returns false when no weight is left (a factor
+    /// that is zero, negative or not finite everywhere); the set is then not usable.
     pub(crate) fn set_reweighted<const M: usize>(
         &mut self,
         base: &LobeSet<M>,
