@@ -151,8 +151,15 @@ type = "point"
 position = [0, 0.0001, 0]
 intensity = 1
 "#;
-    let s = scene(&text.replace("\n[camera]", "medium = \"thin\"\n\n[camera]"));
-    for guiding in [Components::OFF, Components::FULL] {
+    let hard = text.replace("\n[camera]", "medium = \"thin\"\n\n[camera]");
+    // Moderate g takes the other guided-direction path (lobes reweighted by HG, not the
+    // exact product).
+    let moderate = hard.replace("g = 0.99 }", "g = 0.6 }").replace("g = -0.999 }", "g = -0.5 }");
+    for (s, guiding, reweighted) in [
+        (scene(&hard), Components::OFF, false),
+        (scene(&hard), Components::FULL, false),
+        (scene(&moderate), Components::FULL, true),
+    ] {
         let mut o = RenderOptions::unguided(Budget::Samples(8), 1);
         o.guiding.components = guiding;
         o.guiding.train = TrainBudget::Passes(3);
@@ -164,6 +171,7 @@ intensity = 1
         );
         assert!(r.image.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
         assert!(r.film.average().iter().any(|v| *v > 0.0), "the hard case rendered black");
+        assert_eq!(r.counters.reweighted_products > 0, reweighted, "{:?}", r.counters);
     }
 }
 
