@@ -113,6 +113,13 @@ fn bench(c: &mut Criterion) {
             d.apply_hg_weights(black_box(dirs[i]), 0.6);
         })
     });
+    g.bench_function("init_and_cosine_weights", |b| {
+        b.iter(|| {
+            i = (i + 1) & 1023;
+            d.init(&field, black_box(positions[i]), 0.5);
+            d.apply_cosine_weights(black_box(dirs[i]));
+        })
+    });
     g.bench_function("init_and_cosine_product", |b| {
         b.iter(|| {
             i = (i + 1) & 1023;

@@ -225,8 +225,11 @@ impl RadianceCache for FieldCache<'_> {
     }
     #[inline]
     fn product_cosine(&mut self, _normal: Vec3A) -> bool {
-        // The incident radiance alone: a surface region's samples lie in its hemisphere, and
-        // the cosine product's cost did not pay on the example scenes.
+        // The incident radiance alone. Both cosine products lower the error a little and
+        // cost more than they save (light shaft, full guiding, 32 spp: relMSE 0.073 without,
+        // 0.069 with the exact product, 0.070 with lobes reweighted by their clamped cosine,
+        // which made a 16 spp single-thread render 9% slower; occluded light 0.103, 0.104,
+        // 0.098): equal efficiency within noise, so the cheaper way.
         self.dist.clear_product();
         true
     }
