@@ -227,6 +227,23 @@ fn trains_a_field_and_renders_with_it() {
         serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
     assert_eq!(json["training"]["passes"], 2);
     assert!(json["training"]["regions"].as_u64().unwrap() >= 1);
+    // Adaptive guiding says what its training and its pilot did.
+    let o = zerovar(&[
+        "render",
+        s,
+        "-o",
+        e,
+        "--spp",
+        "2",
+        "--guiding",
+        "auto",
+        "--train-passes",
+        "3",
+        "--quiet",
+    ]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("trained") && err.contains("adaptive guiding"), "{err}");
     // A file that is not a field, and bad guiding arguments, fail clearly.
     let bogus = write("bogus.zvg", b"not a field");
     let o = zerovar(&["render", s, "-o", e, "--field", bogus.to_str().unwrap(), "--quiet"]);

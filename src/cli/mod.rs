@@ -578,6 +578,36 @@ fn run_render(c: RenderCommand) -> Result<()> {
     if let Some(path) = &c.stats {
         write_stats(path, &stats)?;
     }
+    if let Some(t) = &result.training {
+        eprintln!(
+            "{}: trained {} passes ({} spp) in {:.2} s: {} regions, {} lobes",
+            c.scene.display(),
+            t.passes,
+            t.spp,
+            t.seconds,
+            t.field.regions,
+            t.field.lobes
+        );
+    }
+    if let Some(sel) = &result.selection {
+        if sel.stopped_training {
+            eprintln!(
+                "{}: adaptive guiding found no tile worth guiding after {} training passes \
+                 (modelled gain {:.2}): rendered unguided",
+                c.scene.display(),
+                result.training.as_ref().map_or(0, |t| t.passes),
+                sel.gain
+            );
+        } else {
+            eprintln!(
+                "{}: adaptive guiding guided {} of {} tiles (modelled gain {:.2})",
+                c.scene.display(),
+                sel.guided_tiles,
+                sel.tiles,
+                sel.gain
+            );
+        }
+    }
     eprintln!(
         "{}: {} spp in {:.2} s ({:.0} paths/s) -> {} and {}",
         c.scene.display(),
