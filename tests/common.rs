@@ -80,9 +80,18 @@ pub(crate) fn assert_same_image(
     z_max: f64,
     what: &str,
 ) {
-    for (k, ((ma, sa), (mb, sb))) in
-        quadrant_means(a).into_iter().zip(quadrant_means(b)).enumerate()
-    {
+    assert_quadrants_agree(quadrant_means(a), quadrant_means(b), z_max, what);
+}
+
+/// Asserts that two images' quadrant means (from `quadrant_means`) agree within `z_max`
+/// standard errors.
+pub(crate) fn assert_quadrants_agree(
+    a: [(f64, f64); 4],
+    b: [(f64, f64); 4],
+    z_max: f64,
+    what: &str,
+) {
+    for (k, ((ma, sa), (mb, sb))) in a.into_iter().zip(b).enumerate() {
         let z = (ma - mb) / (sa * sa + sb * sb).sqrt();
         assert!(z.abs() < z_max, "{what}: quadrant {k}: {ma} +- {sa} vs {mb} +- {sb} (z = {z:.2})");
     }

@@ -2,7 +2,7 @@
 //! with an analytic cache, robustness of splitting to a wrong cache, and convergence of every
 //! guided component to the unguided image (the proof of unbiasedness).
 
-use crate::common::{quadrant_means, scene};
+use crate::common::{assert_quadrants_agree, quadrant_means, scene};
 use glam::{Vec2, Vec3A};
 use std::cell::RefCell;
 use zerovar::film::Film;
@@ -523,10 +523,7 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
         let q = quadrant_means(&render_adaptive(&s, Components::FULL, 0.5, 256, 7, true));
-        for (k, ((m, se), (mr, ser))) in q.into_iter().zip(reference).enumerate() {
-            let z = (m - mr) / (se * se + ser * ser).sqrt();
-            assert!(z.abs() < 4.5, "{name}, quadrant {k}: {m} vs unguided {mr} (z = {z:.2})");
-        }
+        assert_quadrants_agree(q, reference, 4.5, &format!("{name}, adaptive against unguided"));
     }
 }
 
@@ -608,11 +605,8 @@ fn a_loaded_field_with_windows_on_the_image_so_far_converges_to_the_unguided_ima
             let r = render_with_field(&s, &options, &trained, &|_, _| true).unwrap();
             assert_eq!(r.counters.invalid_samples, 0);
             assert!(r.counters.walks > r.counters.paths, "{name}: the windows never split");
-            let q = quadrant_means(&r.film);
-            for (k, ((m, se), (mr, ser))) in q.into_iter().zip(reference).enumerate() {
-                let z = (m - mr) / (se * se + ser * ser).sqrt();
-                assert!(z.abs() < 4.5, "{name}, quadrant {k}: {m} vs unguided {mr} (z = {z:.2})");
-            }
+            let what = format!("{name}, loaded field against unguided");
+            assert_quadrants_agree(quadrant_means(&r.film), reference, 4.5, &what);
         }
     }
 }

@@ -298,6 +298,32 @@ mod tests {
         MultiGrid::new(&features)
     }
 
+    /// Asserts that `d`'s density integrates to one within `tolerance`, that every sample's
+    /// returned density is its `pdf`, positive and finite, and that `n` samples pass a
+    /// chi-square test against it.
+    fn assert_normalised_and_sampled(
+        d: &VolumeDistribution,
+        rng: &mut Pcg32,
+        n: usize,
+        tolerance: f64,
+        what: &str,
+    ) {
+        let grid = product_grid(d);
+        let pdf = |w: DVec3| f64::from(d.pdf(w.as_vec3()));
+        let integral = grid.integrate(&pdf);
+        assert!((integral - 1.0).abs() < tolerance, "{what}: integrates to {integral}");
+        let samples: Vec<DVec3> = (0..n)
+            .map(|_| {
+                let (w, p) = d.sample_with_pdf(Vec2::new(u01(rng), u01(rng)));
+                assert_eq!(p, d.pdf(w));
+                assert!(p > 0.0 && p.is_finite(), "{what}: density {p}");
+                w.as_dvec3()
+            })
+            .collect();
+        let mut u = || f64::from(u01(rng));
+        grid.chi2(&samples, &pdf, &mut u).assert_pass(1e-3, what);
+    }
+
     #[test]
     fn hg_product_is_normalised_and_sampling_matches_pdf() {
         let mut rng = Pcg32::new(21, 4);
@@ -306,21 +332,8 @@ mod tests {
                 let mut d = with_mixture(&radiance_mixture(kappa), 1.0);
                 d.apply_hg_product(RAY, g);
                 assert_eq!(d.product_kind(), ProductKind::HenyeyGreenstein);
-                let grid = product_grid(&d);
-                let pdf = |w: DVec3| f64::from(d.pdf(w.as_vec3()));
-                let integral = grid.integrate(&pdf);
-                assert!((integral - 1.0).abs() < 2e-4, "kappa {kappa} g {g}: {integral}");
-                let mut samples = Vec::with_capacity(30_000);
-                for _ in 0..30_000 {
-                    let u = Vec2::new(u01(&mut rng), u01(&mut rng));
-                    let (w, p) = d.sample_with_pdf(u);
-                    assert_eq!(p, d.pdf(w));
-                    assert!(p > 0.0 && p.is_finite());
-                    samples.push(w.as_dvec3());
-                }
-                let mut u = || f64::from(u01(&mut rng));
-                grid.chi2(&samples, &pdf, &mut u)
-                    .assert_pass(1e-3, &format!("kappa {kappa} g {g}"));
+                let what = format!("kappa {kappa} g {g}");
+                assert_normalised_and_sampled(&d, &mut rng, 30_000, 2e-4, &what);
             }
         }
     }
@@ -333,19 +346,8 @@ mod tests {
                 let mut d = with_mixture(&radiance_mixture(kappa), 1.0);
                 d.apply_hg_weights(RAY, g);
                 assert_eq!(d.product_kind(), ProductKind::HenyeyGreensteinWeights);
-                let grid = product_grid(&d);
-                let pdf = |w: DVec3| f64::from(d.pdf(w.as_vec3()));
-                let integral = grid.integrate(&pdf);
-                assert!((integral - 1.0).abs() < 2e-4, "kappa {kappa} g {g}: {integral}");
-                let mut samples = Vec::with_capacity(30_000);
-                for _ in 0..30_000 {
-                    let (w, p) = d.sample_with_pdf(Vec2::new(u01(&mut rng), u01(&mut rng)));
-                    assert!(p > 0.0 && p.is_finite());
-                    samples.push(w.as_dvec3());
-                }
-                let mut u = || f64::from(u01(&mut rng));
-                grid.chi2(&samples, &pdf, &mut u)
-                    .assert_pass(1e-3, &format!("weights: kappa {kappa} g {g}"));
+                let what = format!("weights: kappa {kappa} g {g}");
+                assert_normalised_and_sampled(&d, &mut rng, 30_000, 2e-4, &what);
             }
         }
     }
@@ -396,14 +398,8 @@ mod tests {
             let mut d = with_mixture(&radiance_mixture(kappa), 1.0);
             d.apply_cosine_weights(Vec3::Z);
             assert_eq!(d.product_kind(), ProductKind::CosineWeights);
-            let grid = product_grid(&d);
-            let pdf = |w: DVec3| f64::from(d.pdf(w.as_vec3()));
-            assert!((grid.integrate(&pdf) - 1.0).abs() < 2e-4, "kappa {kappa}");
-            let samples: Vec<DVec3> = (0..30_000)
-                .map(|_| d.sample(Vec2::new(u01(&mut rng), u01(&mut rng))).as_dvec3())
-                .collect();
-            let mut u = || f64::from(u01(&mut rng));
-            grid.chi2(&samples, &pdf, &mut u).assert_pass(1e-3, &format!("kappa {kappa}"));
+            let what = format!("cosine weights: kappa {kappa}");
+            assert_normalised_and_sampled(&d, &mut rng, 30_000, 2e-4, &what);
         }
     }
 

@@ -276,6 +276,7 @@ pub fn render(
             }
         }
         training.run(scene, options, progress, u32::MAX)?;
+        // Moved out, not borrowed: the render phase takes the training films by value.
         let (field, direct, films, report) = training.finish();
         let guidance = Guidance {
             field: &field,
@@ -330,9 +331,10 @@ fn early_pilot(
         let left = (t.as_secs_f64() + unused - selection.seconds).max(0.0);
         options.budget = Budget::Time(Duration::from_secs_f64(left));
     }
-    let films = training.films.clone();
-    let mut result =
-        final_phase(scene, &options, None, films, threads, progress, Some(training.report()));
+    // Training ends here: its films go to the render (for `combine_training`).
+    let report = training.report();
+    let films = std::mem::take(&mut training.films);
+    let mut result = final_phase(scene, &options, None, films, threads, progress, Some(report));
     result.seconds += selection.seconds;
     result.selection = Some(Selection { guided_tiles: 0, stopped_training: true, ..selection });
     Some(result)
