@@ -576,13 +576,25 @@ radiance = 1
     let off = RenderOptions { guiding: GuidingOptions::default(), ..options };
     let unguided = render(&s, &off, &|_, _| true).unwrap();
     assert_eq!(auto.image, unguided.image);
-    // The cloud: with this seed the early pilot finds guiding pays (one tile, so its 2 spp
-    // decide by chance: seed 3 stops early), and training goes on to its end.
-    let options = RenderOptions { seed: 7, ..options };
-    let auto = render(&scene(CLOUD), &options, &|_, _| true).unwrap();
-    let selection = auto.selection.unwrap();
-    assert!(!selection.stopped_training && selection.guided_tiles == 1, "{selection:?}");
-    assert_eq!(auto.training.unwrap().passes, 5);
+    // The cloud is one tile, so the early pilot's 2 spp decide by chance: whatever each seed
+    // decides, training stops exactly when the gain is too small, and otherwise runs to its
+    // end; and some seeds go on.
+    let cloud = scene(CLOUD);
+    let mut went_on = 0;
+    for seed in 0..8 {
+        let options = RenderOptions { seed, guiding: options.guiding.clone(), ..options };
+        let auto = render(&cloud, &options, &|_, _| true).unwrap();
+        let selection = auto.selection.unwrap();
+        let passes = auto.training.unwrap().passes;
+        if selection.stopped_training {
+            assert!(selection.gain < 1.02 && selection.guided_tiles == 0, "{selection:?}");
+            assert_eq!(passes, 2);
+        } else {
+            assert_eq!(passes, 5, "{selection:?}");
+            went_on += 1;
+        }
+    }
+    assert!(went_on > 0, "the early pilot stopped every seed's training on the cloud");
 }
 
 #[test]

@@ -24,7 +24,7 @@ use crate::math::{Ray, Spectrum, luminance, positive};
 use crate::media::{Medium, MediumKind};
 use crate::rng::Sampler;
 use crate::stats::Counters;
-use crate::tracking::{transmittance, transmittance_homogeneous};
+use crate::tracking::{MediumRay, TrackedRay, transmittance, transmittance_homogeneous};
 
 /// Segments along the guided stretch of a ray.
 const SEGMENTS: usize = 4;
@@ -198,7 +198,10 @@ impl GuidedDistance {
         }
         let mid = self.ray.at(s.start + 0.5 * s.length);
         counters.field_lookups += 1;
-        let Some((incident, mean)) = cache.estimates(mid, self.lookup_u, self.ray.direction) else {
+        let g = medium.phase.mean_cosine();
+        let Some((incident, inscattered)) =
+            cache.estimates(mid, self.lookup_u, self.ray.direction, g)
+        else {
             return;
         };
         let c = medium.coefficients(mid);
@@ -212,9 +215,7 @@ impl GuidedDistance {
             s.p_guided = MIN_RELATIVE * s.p_std;
             return;
         }
-        // The mean incident radiance stands for L_s: exact for isotropic scattering, close for
-        // moderate g, and an order of magnitude cheaper than the HG convolution per segment.
-        let source = sigma_s * mean + (sigma_t - sigma_s).max(0.0) * self.emission;
+        let source = sigma_s * inscattered + (sigma_t - sigma_s).max(0.0) * self.emission;
         let collide = -(-sigma_t * s.length).exp_m1() / sigma_t;
         let raw = collide * source / incident;
         s.p_guided = if raw.is_finite() {
@@ -340,23 +341,10 @@ pub fn guided_flight(
     let pass =
         GuidedFlight { event: GuidedEvent::Pass, weight: Spectrum::ONE, emitted: Spectrum::ZERO };
     let lookup_u = sampler.next_1d();
-    if let MediumKind::Heterogeneous(h) = &medium.kind {
-        let Some((t0, t1)) = h.clip(ray, t_max) else { return pass };
-        let majorant = h.majorant().max_element();
-        if !positive(majorant) {
-            return pass;
-        }
+    if let MediumKind::Heterogeneous(_) = &medium.kind {
+        let Some(r) = MediumRay::new(medium, ray, t_max) else { return pass };
         return null_collision_flight(
-            medium,
-            ray,
-            (t0, t1),
-            majorant,
-            beta,
-            alpha,
-            lookup_u,
-            cache,
-            sampler,
-            counters,
+            medium, &r, ray, beta, alpha, lookup_u, cache, sampler, counters,
         );
     }
     if let MediumKind::Homogeneous { sigma_t, .. } = medium.kind
@@ -455,9 +443,8 @@ pub fn guided_flight(
 #[allow(clippy::too_many_arguments)]
 fn null_collision_flight(
     medium: &Medium,
+    r: &MediumRay<'_>,
     ray: &Ray,
-    (t0, t1): (f32, f32),
-    majorant: f32,
     beta: Spectrum,
     alpha: f32,
     lookup_u: f32,
@@ -466,9 +453,11 @@ fn null_collision_flight(
     counters: &mut Counters,
 ) -> GuidedFlight {
     let emissive = medium.is_emissive();
+    let g = medium.phase.mean_cosine();
     let guided = alpha > 0.0 && sampler.next_1d() < alpha;
     // Cache estimates are refreshed every 1 / SEGMENTS of the stretch: regions are coarser than
     // the spacing of tentative collisions, and a lookup costs far more than a density lookup.
+    let (t0, t1) = r.range();
     let refresh = (t1 - t0) / SEGMENTS as f32;
     let mut cached: Option<(f32, f32, f32)> = None; // (t of lookup, L_s, L)
     // The standard tracker's weight of the prefix, and its guided probability over its
@@ -482,54 +471,69 @@ fn null_collision_flight(
         if w.is_finite() { w } else { Spectrum::ZERO }
     };
     let mut emitted = Spectrum::ZERO;
-    let mut t = t0;
-    loop {
-        t += crate::tracking::unit_exponential(sampler.next_1d()) / majorant;
-        if t >= t1 {
-            let weight = mixture(standard, ratio);
-            return GuidedFlight { event: GuidedEvent::Pass, weight, emitted };
+    // Tentative collisions at each coarse cell's own majorant (the bound grid the standard
+    // trackers use): any rate that bounds the extinction keeps the weights exact, and a tight
+    // one wastes fewer density lookups on null collisions than the medium's global majorant.
+    for span in r.segments() {
+        let majorant = span.majorant.max_element();
+        if !positive(majorant) {
+            continue; // an empty cell: nothing can collide in it
         }
-        let x = ray.at(t);
-        let c = medium.coefficients(x);
-        counters.density_lookups += 1;
-        counters.guided_density_lookups += 1;
-        let sigma_s = c.sigma_t * c.albedo;
-        let sigma_n = (Spectrum::splat(majorant) - c.sigma_t).max(Spectrum::ZERO);
-        let path = beta * standard;
-        if emissive {
-            let prefix = beta * mixture(standard, ratio);
-            emitted += prefix * (c.sigma_t - sigma_s) * medium.emission / majorant;
-        }
-        // Standard choice: history-aware spectral tracking (delta tracking when grey).
-        let (ps, pn) = (luminance(path * sigma_s), luminance(path * sigma_n));
-        if !positive(ps + pn) {
-            return GuidedFlight { event: GuidedEvent::Absorb, weight: Spectrum::ZERO, emitted };
-        }
-        let p_std = ps / (ps + pn);
-        let mut p_guided = p_std;
-        if alpha > 0.0 && ps > 0.0 && pn > 0.0 {
-            if cached.is_none_or(|(at, _, _)| t - at > refresh) {
-                counters.field_lookups += 1;
-                cached = cache.estimates(x, lookup_u, ray.direction).map(|(li, ls)| (t, ls, li));
+        let mut t = span.t0;
+        loop {
+            t += crate::tracking::unit_exponential(sampler.next_1d()) / majorant;
+            if t >= span.t1 {
+                break;
             }
-            if let Some((_, ls, li)) = cached {
-                let (a, b) = (ps * ls, pn * li);
-                if a + b > 0.0 && (a + b).is_finite() {
-                    // Bounded away from 0 and 1, so neither event loses support.
-                    p_guided = (a / (a + b)).clamp(0.02, 0.98);
+            let c = r.coefficients(t);
+            counters.density_lookups += 1;
+            counters.guided_density_lookups += 1;
+            let sigma_s = c.sigma_t * c.albedo;
+            let sigma_n = (Spectrum::splat(majorant) - c.sigma_t).max(Spectrum::ZERO);
+            let path = beta * standard;
+            if emissive {
+                let prefix = beta * mixture(standard, ratio);
+                emitted += prefix * (c.sigma_t - sigma_s) * medium.emission / majorant;
+            }
+            // Standard choice: history-aware spectral tracking (delta tracking when grey).
+            let (ps, pn) = (luminance(path * sigma_s), luminance(path * sigma_n));
+            if !positive(ps + pn) {
+                return GuidedFlight {
+                    event: GuidedEvent::Absorb,
+                    weight: Spectrum::ZERO,
+                    emitted,
+                };
+            }
+            let p_std = ps / (ps + pn);
+            let mut p_guided = p_std;
+            if alpha > 0.0 && ps > 0.0 && pn > 0.0 {
+                if cached.is_none_or(|(at, _, _)| t - at > refresh) {
+                    counters.field_lookups += 1;
+                    cached = cache
+                        .estimates(ray.at(t), lookup_u, ray.direction, g)
+                        .map(|(li, ls)| (t, ls, li));
+                }
+                if let Some((_, ls, li)) = cached {
+                    let (a, b) = (ps * ls, pn * li);
+                    if a + b > 0.0 && (a + b).is_finite() {
+                        // Bounded away from 0 and 1, so neither event loses support.
+                        p_guided = (a / (a + b)).clamp(0.02, 0.98);
+                    }
                 }
             }
+            let p = if guided { p_guided } else { p_std };
+            if sampler.next_1d() < p {
+                standard *= sigma_s / (majorant * p_std);
+                ratio *= p_guided / p_std;
+                let weight = mixture(standard, ratio);
+                return GuidedFlight { event: GuidedEvent::Scatter { t }, weight, emitted };
+            }
+            standard *= sigma_n / (majorant * (1.0 - p_std));
+            ratio *= (1.0 - p_guided) / (1.0 - p_std);
         }
-        let p = if guided { p_guided } else { p_std };
-        if sampler.next_1d() < p {
-            standard *= sigma_s / (majorant * p_std);
-            ratio *= p_guided / p_std;
-            let weight = mixture(standard, ratio);
-            return GuidedFlight { event: GuidedEvent::Scatter { t }, weight, emitted };
-        }
-        standard *= sigma_n / (majorant * (1.0 - p_std));
-        ratio *= (1.0 - p_guided) / (1.0 - p_std);
     }
+    let weight = mixture(standard, ratio);
+    GuidedFlight { event: GuidedEvent::Pass, weight, emitted }
 }
 
 #[inline]

@@ -83,11 +83,12 @@ pub trait RadianceCache {
     /// During training: the next-event estimate of the fluence at a recorded vertex `x`
     /// (zero when it found nothing). The field learns only what the continuation brings
     /// back; these complete its fluence for the adjoint (see [`DirectFluence`]).
-    fn record_direct(&mut self, _x: Vec3A, _fluence: f32) {}
-    /// `(incident(w), mean_radiance())` at `x`, or `None` where `load` would fail; may be
-    /// cheaper than `load` (no product state), and may leave the loaded point undefined.
-    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A) -> Option<(f32, f32)> {
-        self.load(x, u).then(|| (self.incident(w), self.mean_radiance()))
+    fn record_direct(&mut self, _record: DirectRecord) {}
+    /// `(incident(w), inscattered(w, g))` at `x` for distance sampling, or `None` where `load`
+    /// would fail; may be cheaper than `load` (no product state, a coarser in-scattering
+    /// estimate), and may leave the loaded point undefined.
+    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<(f32, f32)> {
+        self.load(x, u).then(|| (self.incident(w), self.inscattered(w, g)))
     }
 }
 
@@ -112,12 +113,12 @@ pub struct FieldCache<'a> {
     dist: VolumeDistribution,
     /// Per region, the fluence next-event estimation brings (absent for a loaded field).
     direct: Option<&'a DirectFluence>,
-    /// The loaded region's direct fluence.
-    direct_here: f32,
+    /// The loaded region's direct fluence and its mean direction (see [`DirectFluence`]).
+    direct_here: (f32, Vec3A),
     /// Direct-fluence records of training paths, when training.
-    records: Option<Vec<(Vec3A, f32)>>,
-    /// The last `estimates`: region, direction, incident and mean radiance.
-    memo: Option<(usize, Vec3A, f32, f32)>,
+    records: Option<Vec<DirectRecord>>,
+    /// The last `estimates`: region, direction, g, incident and in-scattered radiance.
+    memo: Option<(usize, Vec3A, f32, f32, f32)>,
 }
 
 impl<'a> FieldCache<'a> {
@@ -128,7 +129,7 @@ impl<'a> FieldCache<'a> {
             field,
             dist: VolumeDistribution::default(),
             direct: None,
-            direct_here: 0.0,
+            direct_here: (0.0, Vec3A::ZERO),
             records: None,
             memo: None,
         }
@@ -141,14 +142,44 @@ impl<'a> FieldCache<'a> {
     }
 
     /// The direct-fluence records gathered so far.
-    pub fn take_records(&mut self) -> Vec<(Vec3A, f32)> {
+    pub fn take_records(&mut self) -> Vec<DirectRecord> {
         self.records.as_mut().map(std::mem::take).unwrap_or_default()
     }
 
     #[inline]
     fn total_fluence(&self) -> f32 {
-        self.dist.fluence() + self.direct_here
+        self.dist.fluence() + self.direct_here.0
     }
+}
+
+/// A next-event estimate at a training vertex: where, the fluence it estimates, and the
+/// direction towards the light it sampled.
+#[derive(Clone, Copy, Debug)]
+pub struct DirectRecord {
+    /// The vertex.
+    pub position: Vec3A,
+    /// The estimate of the fluence next-event estimation collects there (zero when the light
+    /// sample found nothing).
+    pub fluence: f32,
+    /// Unit direction from the vertex towards the sampled light.
+    pub direction: Vec3A,
+}
+
+/// Radiance HG scatters towards `-w` out of a direct fluence `fluence` whose mean direction
+/// is `axis` (its length the fluence-weighted mean resultant length, at most 1): HG with `g`
+/// times that length about the axis, which is exact for light from one direction (the sun, a
+/// small light) and isotropic for light from everywhere, the moment-matched answer between
+/// (as `VolumeDistribution::apply_hg_weights` treats a lobe).
+#[inline]
+fn direct_inscattered(fluence: f32, axis: Vec3A, w: Vec3A, g: f32) -> f32 {
+    if fluence <= 0.0 {
+        return 0.0;
+    }
+    let r = axis.length();
+    if r <= 1e-6 || g == 0.0 {
+        return fluence * crate::math::INV_FOUR_PI;
+    }
+    fluence * crate::phase::hg(g * r.min(1.0), axis.dot(w) / r)
 }
 
 /// Per region of a field, the mean next-event estimate of the fluence at its training
@@ -158,19 +189,27 @@ impl<'a> FieldCache<'a> {
 /// its lobes on directions where a continuation finds nothing new (a point light cannot be hit
 /// at all). The adjoint of roulette and distance sampling needs all the light, so it adds this
 /// table's value to the field's fluence.
+///
+/// Distance sampling needs the radiance scattered towards the path, and under a strongly
+/// forward phase function that depends on where the direct light comes from (a back-lit
+/// cloud's rim is bright only towards the sun): each region also keeps the fluence-weighted
+/// mean of the directions to the lights, whose length says how concentrated they are.
 #[derive(Clone, Debug, Default)]
 pub struct DirectFluence {
     values: Vec<f32>,
+    axes: Vec<Vec3A>,
 }
 
 impl DirectFluence {
-    /// The mean of `records` (vertex, next-event fluence estimate) per region of `field`.
-    pub fn build(field: &Field, records: &[(Vec3A, f32)]) -> Self {
+    /// The mean of `records` per region of `field`, and their fluence-weighted mean direction.
+    pub fn build(field: &Field, records: &[DirectRecord]) -> Self {
         let n = field.regions().len();
         let (mut sums, mut counts) = (vec![0.0f64; n], vec![0u64; n]);
-        for &(x, v) in records {
-            if let Some(i) = field.lookup_index(x.into(), 0.5) {
-                sums[i] += f64::from(v);
+        let mut moments = vec![glam::DVec3::ZERO; n];
+        for r in records {
+            if let Some(i) = field.lookup_index(r.position.into(), 0.5) {
+                sums[i] += f64::from(r.fluence);
+                moments[i] += r.direction.as_dvec3() * f64::from(r.fluence);
                 counts[i] += 1;
             }
         }
@@ -179,12 +218,28 @@ impl DirectFluence {
             .zip(&counts)
             .map(|(&s, &c)| if c > 0 { (s / c as f64) as f32 } else { 0.0 })
             .collect();
-        Self { values }
+        let axes = sums
+            .iter()
+            .zip(&moments)
+            .map(|(&s, &m)| {
+                let a = if s > 0.0 { (m / s).as_vec3a() } else { Vec3A::ZERO };
+                // Rounding may leave a unit mean a hair long.
+                if a.length_squared() > 1.0 { a.normalize() } else { a }
+            })
+            .collect();
+        Self { values, axes }
     }
 
     /// The direct fluence of region `index` (zero when unknown).
     pub fn get(&self, index: usize) -> f32 {
         self.values.get(index).copied().unwrap_or(0.0)
+    }
+
+    /// The fluence-weighted mean direction towards the lights in region `index`: its length
+    /// is 1 for light from one direction and near 0 for light from all around (zero when
+    /// unknown).
+    pub fn axis(&self, index: usize) -> Vec3A {
+        self.axes.get(index).copied().unwrap_or(Vec3A::ZERO)
     }
 }
 
@@ -193,8 +248,8 @@ impl RadianceCache for FieldCache<'_> {
     fn load(&mut self, x: Vec3A, u: f32) -> bool {
         let ok = self.dist.init(self.field, x.into(), u);
         self.direct_here = match (self.direct, self.dist.region_index()) {
-            (Some(d), Some(i)) if ok => d.get(i as usize),
-            _ => 0.0,
+            (Some(d), Some(i)) if ok => (d.get(i as usize), d.axis(i as usize)),
+            _ => (0.0, Vec3A::ZERO),
         };
         ok
     }
@@ -208,8 +263,8 @@ impl RadianceCache for FieldCache<'_> {
     }
     #[inline]
     fn inscattered(&self, w: Vec3A, g: f32) -> f32 {
-        // The direct part is taken as isotropic: the table keeps no directions.
-        self.dist.inscattered_radiance(w.into(), g) + self.direct_here * crate::math::INV_FOUR_PI
+        let (direct, axis) = self.direct_here;
+        self.dist.inscattered_radiance(w.into(), g) + direct_inscattered(direct, axis, w, g)
     }
     #[inline]
     fn product_hg(&mut self, ray_dir: Vec3A, g: f32) -> bool {
@@ -243,27 +298,32 @@ impl RadianceCache for FieldCache<'_> {
         self.dist.pdf(w.into())
     }
     #[inline]
-    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A) -> Option<(f32, f32)> {
+    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<(f32, f32)> {
         // Straight from the region, without loading its mixture: a ray's segments mostly
         // fall in one region, so the last answer is kept too.
         let i = self.field.lookup_index(x.into(), u)?;
-        if let Some((j, v, li, lm)) = self.memo
+        if let Some((j, v, gm, li, ls)) = self.memo
             && j == i
             && v == w
+            && gm == g
         {
-            return Some((li, lm));
+            return Some((li, ls));
         }
         let region = &self.field.regions()[i];
-        let direct = self.direct.map_or(0.0, |d| d.get(i));
+        let (direct, axis) = self.direct.map_or((0.0, Vec3A::ZERO), |d| (d.get(i), d.axis(i)));
         let li = region.fluence() * region.mixture().pdf(w.into());
-        let lm = (region.fluence() + direct) * crate::math::INV_FOUR_PI;
-        self.memo = Some((i, w, li, lm));
-        Some((li, lm))
+        // The field's own (indirect) part is taken as isotropic, an order of magnitude cheaper
+        // than its HG convolution per segment; the direct part, often sharply directional,
+        // keeps its direction.
+        let ls =
+            region.fluence() * crate::math::INV_FOUR_PI + direct_inscattered(direct, axis, w, g);
+        self.memo = Some((i, w, g, li, ls));
+        Some((li, ls))
     }
     #[inline]
-    fn record_direct(&mut self, x: Vec3A, fluence: f32) {
+    fn record_direct(&mut self, record: DirectRecord) {
         if let Some(r) = &mut self.records {
-            r.push((x, fluence));
+            r.push(record);
         }
     }
 }
@@ -296,5 +356,78 @@ impl RadianceCache for NoCache {
     }
     fn pdf(&self, _: Vec3A) -> f32 {
         0.0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Directions spread evenly over the sphere (a Fibonacci lattice), each standing for
+    /// `4 pi / n` of solid angle.
+    fn sphere(n: usize) -> impl Iterator<Item = Vec3A> {
+        let golden = std::f32::consts::PI * (3.0 - 5.0f32.sqrt());
+        (0..n).map(move |i| {
+            let z = 1.0 - (2 * i + 1) as f32 / n as f32;
+            let r = (1.0 - z * z).sqrt();
+            let phi = golden * i as f32;
+            Vec3A::new(r * phi.cos(), r * phi.sin(), z)
+        })
+    }
+
+    #[test]
+    fn direct_inscattering_keeps_the_fluence_and_the_lights_direction() {
+        let n = 200_000;
+        let axis = Vec3A::new(0.36, -0.48, 0.8);
+        for g in [-0.9f32, -0.3, 0.0, 0.6, 0.85] {
+            for r in [0.0f32, 0.3, 0.9, 1.0] {
+                // HG scatters all of the fluence, whatever the direction spread.
+                let total: f64 = sphere(n)
+                    .map(|w| f64::from(direct_inscattered(2.0, axis * r, w, g)))
+                    .sum::<f64>()
+                    * 4.0
+                    * std::f64::consts::PI
+                    / n as f64;
+                assert!((total - 2.0).abs() < 2e-3 * 2.0, "g {g}, r {r}: {total}");
+            }
+            // Light from one direction scatters exactly as HG does, peaked towards the light.
+            for w in [axis, -axis, Vec3A::X, Vec3A::new(0.6, 0.0, 0.8)] {
+                let expected = 2.0 * crate::phase::hg(g, axis.dot(w));
+                let got = direct_inscattered(2.0, axis, w, g);
+                assert!((got - expected).abs() <= 1e-5 * expected, "g {g}: {got} vs {expected}");
+            }
+        }
+        // Light from all around (mean direction zero) is isotropic; no light scatters none.
+        let iso = direct_inscattered(2.0, Vec3A::ZERO, Vec3A::Z, 0.9);
+        assert!((iso - 2.0 * crate::math::INV_FOUR_PI).abs() < 1e-7);
+        assert_eq!(direct_inscattered(0.0, axis, axis, 0.9), 0.0);
+    }
+
+    #[test]
+    fn the_direct_table_keeps_each_regions_mean_direction() {
+        let mut field =
+            zerovar_guiding::Field::new(zerovar_guiding::FieldConfig::default()).unwrap();
+        let sample = zerovar_guiding::Sample {
+            position: glam::Vec3::ZERO,
+            direction: glam::Vec3::Z,
+            radiance: 1.0,
+            pdf: 1.0,
+            distance: f32::INFINITY,
+            volume: true,
+        };
+        field.update(&[sample; 10]).unwrap();
+        assert_eq!(field.regions().len(), 1);
+        // One region: two lights, the second three times as bright, at right angles.
+        let (a, b) = (Vec3A::X, Vec3A::Y);
+        let records: Vec<DirectRecord> = [(a, 1.0), (b, 3.0), (b, 0.0)]
+            .iter()
+            .map(|&(direction, fluence)| DirectRecord { position: Vec3A::ZERO, fluence, direction })
+            .collect();
+        let table = DirectFluence::build(&field, &records);
+        assert!((table.get(0) - 4.0 / 3.0).abs() < 1e-6);
+        let expected = (a * 1.0 + b * 3.0) / 4.0;
+        assert!((table.axis(0) - expected).length() < 1e-6, "{}", table.axis(0));
+        // Regions the records never reached, or a table that does not know the region.
+        assert_eq!(DirectFluence::default().axis(3), Vec3A::ZERO);
     }
 }

@@ -3,9 +3,10 @@
 //! add to the field's fluence (see [`DirectFluence`]).
 //!
 //! The file is `ZVTRAIN\0`, a format version (u32), the field's length (u64) and the field in
-//! the guiding crate's own format, then the table: a count (u32) and that many f32 values, all
-//! little-endian. A bare guiding-crate field (another tool's, or an older `zerovar train`'s)
-//! is read too, without a table.
+//! the guiding crate's own format, then the table: a count (u32), that many f32 values, and
+//! (from version 2) as many mean directions of three f32 each, all little-endian. Version 1
+//! files (no directions: the direct light is then taken as isotropic) and bare guiding-crate
+//! fields (another tool's, or an older `zerovar train`'s, without a table) are read too.
 
 use super::DirectFluence;
 use std::io::{Read, Write};
@@ -14,7 +15,7 @@ use zerovar_guiding::{Field, GuidingError};
 /// The first bytes of a trained-field file.
 pub const TRAINED_MAGIC: [u8; 8] = *b"ZVTRAIN\0";
 /// Version of the trained-field layout.
-pub const TRAINED_VERSION: u32 = 1;
+pub const TRAINED_VERSION: u32 = 2;
 
 /// A trained guiding field and what the renderer learned beside it.
 #[derive(Clone, Debug)]
@@ -30,7 +31,8 @@ impl TrainedField {
     pub fn save(&self, mut w: impl Write) -> Result<(), GuidingError> {
         let mut field = Vec::new();
         self.field.save(&mut field)?;
-        let values = self.direct.as_ref().map_or(&[][..], |d| &d.values[..]);
+        let (values, axes) =
+            self.direct.as_ref().map_or((&[][..], &[][..]), |d| (&d.values[..], &d.axes[..]));
         w.write_all(&TRAINED_MAGIC)?;
         w.write_all(&TRAINED_VERSION.to_le_bytes())?;
         w.write_all(&(field.len() as u64).to_le_bytes())?;
@@ -38,6 +40,11 @@ impl TrainedField {
         w.write_all(&(values.len() as u32).to_le_bytes())?;
         for v in values {
             w.write_all(&v.to_le_bytes())?;
+        }
+        for a in axes {
+            for c in a.to_array() {
+                w.write_all(&c.to_le_bytes())?;
+            }
         }
         w.flush()?;
         Ok(())
@@ -55,7 +62,7 @@ impl TrainedField {
             return Err(GuidingError::BadMagic);
         }
         let found = u32::from_le_bytes(read_array(&mut r)?);
-        if found != TRAINED_VERSION {
+        if !(1..=TRAINED_VERSION).contains(&found) {
             return Err(GuidingError::Version { found, expected: TRAINED_VERSION });
         }
         let length = u64::from_le_bytes(read_array(&mut r)?);
@@ -76,7 +83,21 @@ impl TrainedField {
             }
             values.push(v);
         }
-        let direct = (count > 0).then_some(DirectFluence { values });
+        let mut axes = vec![glam::Vec3A::ZERO; if found >= 2 { count } else { 0 }];
+        for a in &mut axes {
+            let mut c = [0.0f32; 3];
+            for x in &mut c {
+                *x = f32::from_le_bytes(read_array(&mut r)?);
+            }
+            *a = glam::Vec3A::from_array(c);
+            // A mean of unit vectors: finite, and no longer than 1 up to rounding.
+            if !(a.is_finite() && a.length_squared() <= 1.0 + 1e-3) {
+                return Err(GuidingError::Decode(format!(
+                    "direct-light direction {c:?} is not a mean of directions"
+                )));
+            }
+        }
+        let direct = (count > 0).then_some(DirectFluence { values, axes });
         Ok(Self { field, direct })
     }
 }
@@ -90,6 +111,7 @@ fn read_array<const N: usize>(r: &mut impl Read) -> Result<[u8; N], GuidingError
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::guided::DirectRecord;
     use glam::Vec3A;
     use zerovar_guiding::{FieldConfig, Sample};
 
@@ -109,8 +131,13 @@ mod tests {
             })
             .collect();
         field.update(&samples).unwrap();
-        let records: Vec<(Vec3A, f32)> =
-            (0..100).map(|i| (Vec3A::splat(i as f32 * 0.01), 2.0)).collect();
+        let records: Vec<DirectRecord> = (0..100)
+            .map(|i| DirectRecord {
+                position: Vec3A::splat(i as f32 * 0.01),
+                fluence: 2.0,
+                direction: Vec3A::new(0.6, 0.0, if i % 2 == 0 { 0.8 } else { -0.8 }),
+            })
+            .collect();
         let direct = DirectFluence::build(&field, &records);
         TrainedField { field, direct: Some(direct) }
     }
@@ -122,7 +149,15 @@ mod tests {
         t.save(&mut bytes).unwrap();
         let back = TrainedField::load(&bytes[..]).unwrap();
         assert_eq!(back.direct.as_ref().unwrap().values, t.direct.as_ref().unwrap().values);
+        assert_eq!(back.direct.as_ref().unwrap().axes, t.direct.as_ref().unwrap().axes);
         assert_eq!(back.field.regions().len(), t.field.regions().len());
+        // A version 1 file (values, no directions) loads with isotropic direct light.
+        let mut old = bytes[..bytes.len() - 12 * t.field.regions().len()].to_vec();
+        old[8..12].copy_from_slice(&1u32.to_le_bytes());
+        let back = TrainedField::load(&old[..]).unwrap();
+        let direct = back.direct.unwrap();
+        assert_eq!(direct.values, t.direct.as_ref().unwrap().values);
+        assert!((0..direct.values.len()).all(|i| direct.axis(i) == Vec3A::ZERO));
         // A bare guiding field loads without a table.
         let mut bare = Vec::new();
         t.field.save(&mut bare).unwrap();
@@ -132,10 +167,19 @@ mod tests {
         for cut in [4, 12, 20, bytes.len() - 2] {
             assert!(TrainedField::load(&bytes[..cut]).is_err(), "cut at {cut}");
         }
+        // The last value, then the last direction's last component.
+        let n = bytes.len();
+        let last_value = n - 12 * t.field.regions().len() - 4;
+        for (at, what) in [(last_value, "fluence"), (n - 4, "direction")] {
+            let mut bad = bytes.clone();
+            bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
+            let e = TrainedField::load(&bad[..]).unwrap_err().to_string();
+            assert!(e.contains(what), "{e}");
+        }
+        // A direction longer than a mean of unit vectors can be.
         let mut bad = bytes.clone();
-        let n = bad.len();
-        bad[n - 4..].copy_from_slice(&f32::NAN.to_le_bytes());
-        assert!(TrainedField::load(&bad[..]).unwrap_err().to_string().contains("fluence"));
+        bad[n - 4..].copy_from_slice(&2.0f32.to_le_bytes());
+        assert!(TrainedField::load(&bad[..]).unwrap_err().to_string().contains("direction"));
         assert!(matches!(TrainedField::load(&b"not a field"[..]), Err(GuidingError::BadMagic)));
     }
 }

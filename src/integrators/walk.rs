@@ -10,7 +10,9 @@
 
 use crate::bsdf::Bsdf;
 use crate::guided::distance::{GuidedEvent, guided_flight};
-use crate::guided::{Components, EXACT_PRODUCT_MIN_G, PRODUCT_MIN_G, RadianceCache, window};
+use crate::guided::{
+    Components, DirectRecord, EXACT_PRODUCT_MIN_G, PRODUCT_MIN_G, RadianceCache, window,
+};
 use crate::lights::Light;
 use crate::math::{Frame, Ray, Spectrum, luminance, positive, power_heuristic};
 use crate::rng::Sampler;
@@ -401,11 +403,17 @@ struct DirectSample {
     /// MIS-weighted radiance arriving from the light (luminance): `radiance / pdf` estimates
     /// the fluence next-event estimation collects.
     radiance: f32,
+    /// Unit direction towards the sampled light.
+    direction: Vec3A,
 }
 
 impl DirectSample {
-    const NONE: DirectSample =
-        DirectSample { contribution: Spectrum::ZERO, pdf: 0.0, radiance: 0.0 };
+    const NONE: DirectSample = DirectSample {
+        contribution: Spectrum::ZERO,
+        pdf: 0.0,
+        radiance: 0.0,
+        direction: Vec3A::ZERO,
+    };
 }
 
 /// Next-event estimation: one light chosen uniformly, a direction sampled on it, weighed
@@ -454,6 +462,7 @@ fn sample_light(
         contribution: f * arriving / light_pdf,
         pdf: light_pdf,
         radiance: luminance(arriving),
+        direction: dir,
     }
 }
 
@@ -471,7 +480,11 @@ fn record_vertex<C: RadianceCache>(
         // cache's direct-fluence records instead (`guided::DirectFluence`).
         r.add_vertex(p.into(), wi.into(), pdf, luminance(beta), volume);
         let fluence = if direct.pdf > 0.0 { direct.radiance / direct.pdf } else { 0.0 };
-        ctx.cache.record_direct(p, if fluence.is_finite() { fluence } else { 0.0 });
+        ctx.cache.record_direct(DirectRecord {
+            position: p,
+            fluence: if fluence.is_finite() { fluence } else { 0.0 },
+            direction: direct.direction,
+        });
     }
 }
 

@@ -14,7 +14,7 @@ use crate::math::{Spectrum, is_finite, luminance};
 use crate::rng::{Sampler, mix64};
 use crate::scene::Scene;
 use crate::stats::Counters;
-use glam::{Vec2, Vec3A};
+use glam::Vec2;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
@@ -771,7 +771,7 @@ struct PassOutput {
     /// Training samples in tile order (when recording).
     samples: Vec<Sample>,
     /// Direct-fluence records in tile order (when recording).
-    records: Vec<(Vec3A, f32)>,
+    records: Vec<crate::guided::DirectRecord>,
 }
 
 /// The tiles of a `w x h` image in row-major order.
@@ -791,7 +791,7 @@ fn render_pass(
     let [w, h] = scene.camera.resolution();
     let tiles = tiles(w, h);
     let unguided = WalkSettings { guide: Components::OFF, ..*pass.settings };
-    type TileResult = ((Vec<PixelSum>, Counters, Vec<Sample>), Vec<(Vec3A, f32)>);
+    type TileResult = ((Vec<PixelSum>, Counters, Vec<Sample>), Vec<crate::guided::DirectRecord>);
     let results: Vec<TileResult> = tiles
         .par_iter()
         .enumerate()

@@ -222,6 +222,11 @@ impl<'a> MediumRay<'a> {
         }
     }
 
+    /// The ray parameters where the tracked part starts and ends.
+    pub fn range(&self) -> (f32, f32) {
+        (self.t0, self.t1)
+    }
+
     fn heterogeneous(&self) -> Option<&'a Heterogeneous> {
         match &self.medium.kind {
             MediumKind::Heterogeneous(h) => Some(h),
