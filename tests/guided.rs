@@ -13,7 +13,7 @@ use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
 use zerovar::math::Ray;
 use zerovar::media::Medium;
 use zerovar::render::{
-    Budget, GuidingOptions, RenderOptions, TrainBudget, render, render_with_field,
+    Budget, GuidingOptions, RenderOptions, RenderResult, TrainBudget, render, render_with_field,
 };
 use zerovar::rng::Sampler;
 use zerovar::scene::Scene;
@@ -456,7 +456,7 @@ radiance = 0.2
 "#;
 
 fn render_with(s: &Scene, components: Components, alpha: f32, spp: u32, seed: u64) -> Film {
-    render_adaptive(s, components, alpha, spp, seed, false)
+    render_adaptive(s, components, alpha, spp, seed, false).film
 }
 
 fn render_adaptive(
@@ -466,7 +466,7 @@ fn render_adaptive(
     spp: u32,
     seed: u64,
     adaptive: bool,
-) -> Film {
+) -> RenderResult {
     let guiding = GuidingOptions {
         components,
         alpha,
@@ -477,7 +477,7 @@ fn render_adaptive(
     let options = RenderOptions { budget: Budget::Samples(spp), seed, threads: None, guiding };
     let r = render(s, &options, &|_, _| true).unwrap();
     assert_eq!(r.counters.invalid_samples, 0);
-    r.film
+    r
 }
 
 #[test]
@@ -517,14 +517,32 @@ fn every_guided_component_converges_to_the_unguided_image() {
 
 #[test]
 fn adaptive_guiding_converges_to_the_unguided_image() {
-    // Whichever tiles the pilot guides, each pixel averages samples of one unbiased strategy
-    // drawn independently of the pilot, so the image converges to the unguided one.
+    // Whichever tiles the pilot guides, and with whichever candidate (the requested
+    // components, or roulette alone beside more), each pixel averages samples of one unbiased
+    // strategy drawn independently of the pilot, so the image converges to the unguided one.
+    // Full guiding offers roulette alone too; directions and distances without roulette are
+    // the only candidate.
+    let without_roulette = Components { roulette: false, ..Components::FULL };
+    let mut chosen = Vec::new();
     for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
-        let q = quadrant_means(&render_adaptive(&s, Components::FULL, 0.5, 256, 7, true));
-        assert_quadrants_agree(q, reference, 4.5, &format!("{name}, adaptive against unguided"));
+        for requested in [Components::FULL, without_roulette] {
+            let r = render_adaptive(&s, requested, 0.5, 256, 7, true);
+            let selection = r.selection.expect("adaptive guiding reports its choice");
+            let what = format!("{name}, adaptive {} against unguided", selection.components);
+            assert_quadrants_agree(quadrant_means(&r.film), reference, 4.5, &what);
+            let candidates = if requested.roulette {
+                vec![requested.name(), "rr".to_string()]
+            } else {
+                vec![requested.name()]
+            };
+            assert!(candidates.contains(&selection.components), "{what}: {selection:?}");
+            chosen.push(selection.components);
+        }
     }
+    // Both kinds of candidate were rendered with.
+    assert!(chosen.iter().any(|c| c == "rr") && chosen.iter().any(|c| c != "rr"), "{chosen:?}");
 }
 
 #[test]

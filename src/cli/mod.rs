@@ -600,10 +600,11 @@ fn run_render(c: RenderCommand) -> Result<()> {
             );
         } else {
             eprintln!(
-                "{}: adaptive guiding guided {} of {} tiles (modelled gain {:.2})",
+                "{}: adaptive guiding guided {} of {} tiles with {} (modelled gain {:.2})",
                 c.scene.display(),
                 sel.guided_tiles,
                 sel.tiles,
+                sel.components,
                 sel.gain
             );
         }

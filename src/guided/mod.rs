@@ -41,6 +41,23 @@ impl Components {
         self.directions || self.distances || self.roulette
     }
 
+    /// Weight-window roulette and splitting alone.
+    pub const ROULETTE: Components =
+        Components { directions: false, distances: false, roulette: true };
+
+    /// The name [`parse`](Self::parse) reads back: `off`, `full`, or a `+`-joined list.
+    pub fn name(&self) -> String {
+        if *self == Self::FULL {
+            return "full".into();
+        }
+        let parts: Vec<&str> =
+            [(self.directions, "directions"), (self.distances, "distances"), (self.roulette, "rr")]
+                .iter()
+                .filter_map(|&(on, name)| on.then_some(name))
+                .collect();
+        if parts.is_empty() { "off".into() } else { parts.join("+") }
+    }
+
     /// Parses `off`, `directions`, `distances`, `rr`, `full`, or a `+`-joined list.
     pub fn parse(text: &str) -> Option<Self> {
         let mut c = Components::OFF;
@@ -373,6 +390,21 @@ mod tests {
             let phi = golden * i as f32;
             Vec3A::new(r * phi.cos(), r * phi.sin(), z)
         })
+    }
+
+    #[test]
+    fn component_names_parse_back() {
+        for bits in 0..8u8 {
+            let c = Components {
+                directions: bits & 1 != 0,
+                distances: bits & 2 != 0,
+                roulette: bits & 4 != 0,
+            };
+            assert_eq!(Components::parse(&c.name()), Some(c), "{}", c.name());
+        }
+        assert_eq!(Components::FULL.name(), "full");
+        assert_eq!(Components::OFF.name(), "off");
+        assert_eq!(Components::ROULETTE.name(), "rr");
     }
 
     #[test]

@@ -315,7 +315,7 @@ fn early_pilot(
     }
     let guidance = training.guidance();
     let last_pass = 1 << (EARLY_PILOT_PASSES - 1);
-    let (_, selection) = select::pilot(scene, options, &guidance, last_pass, progress)?;
+    let selection = select::pilot(scene, options, &guidance, last_pass, progress)?.selection;
     if selection.gain >= EARLY_MIN_GAIN {
         training.seconds += selection.seconds;
         return None;
@@ -583,15 +583,16 @@ fn guided_phase(
         );
     }
     let last_pass = report.as_ref().map_or(16, |r| 1u32 << r.passes.saturating_sub(1));
-    let Some((tiles, selection)) = select::pilot(scene, options, &guidance, last_pass, progress)
-    else {
+    let Some(choice) = select::pilot(scene, options, &guidance, last_pass, progress) else {
         // Cancelled during the pilot: nothing rendered.
         let mut options = options.clone();
         options.budget = Budget::Samples(0);
         return final_phase(scene, &options, None, training_films, threads, progress, report);
     };
+    let select::Choice { tiles, components, selection } = choice;
     guidance.guided_tiles = Some(tiles);
     let mut options = options.clone();
+    options.guiding.components = components;
     if let Budget::Time(t) = options.budget {
         let left = t.saturating_sub(Duration::from_secs_f64(selection.seconds));
         options.budget = Budget::Time(left);
