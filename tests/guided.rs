@@ -538,6 +538,14 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
                 vec![requested.name()]
             };
             assert!(candidates.contains(&selection.components), "{what}: {selection:?}");
+            // Every candidate was piloted, and the one rendered gained most.
+            let piloted: Vec<&String> = selection.candidates.iter().map(|c| &c.0).collect();
+            assert_eq!(piloted, candidates.iter().collect::<Vec<_>>(), "{what}");
+            let best = selection.candidates.iter().map(|c| c.1).fold(f64::MIN, f64::max);
+            assert!(
+                selection.candidates.iter().any(|c| c.0 == selection.components && c.1 == best),
+                "{what}: {selection:?}"
+            );
             chosen.push(selection.components);
         }
     }

@@ -106,8 +106,9 @@ struct CompareArgs {
 #[derive(Args)]
 struct GuidingArgs {
     /// Guided decisions: off, directions, distances, rr, full, or a +-joined list
-    /// (e.g. directions+rr); auto is full guiding in the tiles where a pilot finds it pays
-    /// [default: off; full for `train` and with --field].
+    /// (e.g. directions+rr); auto is full guiding (or roulette alone, where that pays
+    /// better) in the tiles where a pilot finds it pays [default: off; full for `train` and
+    /// with --field].
     #[arg(long, value_name = "MODE")]
     guiding: Option<String>,
     /// Probability of the guided strategy in each mixture with standard sampling, in [0, 1]

@@ -3,7 +3,7 @@
 //! (surface or infinity) as the remaining event.
 //!
 //! In heterogeneous media the transmittance is unknown, so guiding works in the
-//! null-collision form (seed notes, section 3.2): tentative collisions come from the majorant,
+//! null-collision form (seed notes, section 3.2): tentative collisions come from local majorants,
 //! and at each one the walk scatters with a probability of its choice, reweighting by
 //! `sigma_s / (mu P_s)` or `sigma_n / (mu (1 - P_s))`. The zero-variance choice weighs
 //! in-scattered radiance `sigma_s L_s` against the radiance the path finds by going on,
@@ -431,7 +431,8 @@ pub fn guided_flight(
     }
 }
 
-/// Guided flight in the null-collision form through a heterogeneous medium over `(t0, t1)`.
+/// Guided flight in the null-collision form along `r`, the part of `ray` inside a
+/// heterogeneous medium (`ray` itself places the cache lookups).
 ///
 /// The mixture with standard tracking is one-sample over the whole flight, as in homogeneous
 /// media: the strategy is drawn once, and every event is weighted by the prefix's mixture

@@ -820,6 +820,10 @@ fn render_pass(
         return None;
     }
     let mut out = PassOutput::default();
+    // A training pass gathers hundreds of megabytes of samples: sized once, not grown by
+    // doubling (each doubling copied everything so far).
+    out.samples.reserve_exact(results.iter().map(|r| r.0.2.len()).sum());
+    out.records.reserve_exact(results.iter().map(|r| r.1.len()).sum());
     for (&(tx, ty), ((sums, c, s), r)) in tiles.iter().zip(results) {
         out.counters += c;
         out.tile_counters.push(c);

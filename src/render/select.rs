@@ -46,6 +46,8 @@ pub struct Selection {
     pub guided_tiles: usize,
     /// What the guided tiles guide (`full`, or `rr` where roulette alone pays better).
     pub components: String,
+    /// Each candidate's components and the modelled gain of its best choice of tiles.
+    pub candidates: Vec<(String, f64)>,
     /// Samples per pixel of each pilot (guided and unguided).
     pub pilot_spp: u32,
     /// Seconds the pilot took.
@@ -159,6 +161,7 @@ pub(super) fn pilot(
     // Each candidate's best set of tiles; the candidate whose set gains most wins (ties go to
     // the earlier, the requested components).
     let mut best: Option<Choice> = None;
+    let mut gains = Vec::with_capacity(strategies.len());
     for ((film, costs), &components) in guided.iter().zip(&strategies) {
         let measured: Vec<TileMeasure> = tile_list
             .iter()
@@ -184,12 +187,14 @@ pub(super) fn pilot(
             .collect();
         let choice = choose(&measured, &smoothed(&measured, columns));
         let selection = summarise(&measured, &choice, components, count);
+        gains.push((components.name(), selection.gain));
         if best.as_ref().is_none_or(|b| selection.gain > b.selection.gain) {
             best = Some(Choice { tiles: choice, components, selection });
         }
     }
     let mut best = best.expect("at least the requested components");
     best.selection.seconds = start.elapsed().as_secs_f64();
+    best.selection.candidates = gains;
     Some(best)
 }
 
@@ -220,6 +225,7 @@ fn summarise(
         tiles: choice.len(),
         guided_tiles: choice.iter().filter(|&&g| g).count(),
         components: components.name(),
+        candidates: Vec::new(),
         pilot_spp,
         seconds: 0.0,
         cost_ratio: ratio(totals[2], totals[3]),
