@@ -35,13 +35,16 @@ impl KdTree {
     /// split plane go to the upper side.
     #[inline]
     pub(crate) fn lookup(&self, pos: Vec3) -> (usize, usize) {
+        // Indexed by the axis without glam's per-component match, which costs a hard-to-predict
+        // branch at every level; the fourth slot is never read (inner nodes have axis < 3).
+        let p = [pos.x, pos.y, pos.z, 0.0];
         let mut i = 0;
         loop {
             let n = self.nodes[i];
             if n.axis == LEAF {
                 return (n.child as usize, i);
             }
-            i = n.child as usize + usize::from(pos[n.axis as usize] >= n.split);
+            i = n.child as usize + usize::from(p[usize::from(n.axis & 3)] >= n.split);
         }
     }
 

@@ -45,6 +45,9 @@ pub struct Mesh {
     normals: Option<Vec<Vec3A>>,
     uvs: Option<Vec<Vec2>>,
     indices: Vec<[u32; 3]>,
+    /// Per triangle, its first vertex and the two edges from it, as the intersection test
+    /// reads them: one contiguous load instead of an index and three scattered vertices.
+    edges: Vec<[Vec3A; 3]>,
     /// Triangle areas, for uniform area sampling.
     areas: Distribution1D,
 }
@@ -76,7 +79,20 @@ impl Mesh {
                 n.into_iter().map(|v| to_world.normal(v).normalize_or_zero()).collect::<Vec<_>>()
             });
         let uvs = uvs.filter(|uv| uv.len() == count);
-        let mut mesh = Self { positions, normals, uvs, indices, areas: Distribution1D::default() };
+        let mut mesh = Self {
+            positions,
+            normals,
+            uvs,
+            indices,
+            edges: Vec::new(),
+            areas: Distribution1D::default(),
+        };
+        mesh.edges = (0..mesh.indices.len())
+            .map(|i| {
+                let (p0, p1, p2) = mesh.vertices(i as u32);
+                [p0, p1 - p0, p2 - p0]
+            })
+            .collect();
         let areas = (0..mesh.indices.len()).map(|i| {
             let (p0, p1, p2) = mesh.vertices(i as u32);
             0.5 * (p1 - p0).cross(p2 - p0).length() as f64
@@ -202,9 +218,7 @@ impl Mesh {
     /// Moller-Trumbore intersection.
     #[inline]
     pub(super) fn intersect_triangle(&self, i: u32, ray: &Ray, t_max: f32) -> Option<PrimHit> {
-        let (p0, p1, p2) = self.vertices(i);
-        let e1 = p1 - p0;
-        let e2 = p2 - p0;
+        let [p0, e1, e2] = self.edges[i as usize];
         let pv = ray.direction.cross(e2);
         let det = e1.dot(pv);
         if det == 0.0 || !det.is_finite() {
