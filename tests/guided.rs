@@ -121,6 +121,25 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
             let edges: Vec<f64> = (0..=32).map(|i| t_max as f64 * i as f64 / 32.0).collect();
             chi2_1d(&samples, &pdf, &edges, &[(-1.0, pass)])
                 .assert_pass(1e-3, &format!("{text}, alpha {alpha}"));
+            // The weight relative to standard sampling (what the walk bounds without weight
+            // windows) is the standard density over the mixture's: the alpha-0 distribution's.
+            let mut standard =
+                GuidedDistance::new(&medium, &ray, t_max, Vec3A::new(0.2, 0.5, 0.3), 0.0, 0.5)
+                    .unwrap();
+            for _ in 0..200 {
+                let (d, c) = &mut *state.borrow_mut();
+                let counters = &mut Counters::default();
+                let (t, mix) = d.sample(&medium, c, &mut sampler, counters);
+                let expected = match t {
+                    Some(t) => standard.pdf(t, &medium, c, counters),
+                    None => standard.pass_probability(&medium, c, counters),
+                };
+                let got = d.standard_over_mixture(t) * mix;
+                assert!(
+                    (got - expected).abs() <= 1e-5 * expected,
+                    "{text}, alpha {alpha}, {t:?}: {got} vs {expected}"
+                );
+            }
         }
     }
 }
@@ -200,6 +219,13 @@ fn null_collision_guided_weights_stay_bounded_and_unbiased() {
                 &mut counters,
             );
             largest = largest.max(f.weight.max_element());
+            // Standard weights are all 1 here, so the weight is the gain over standard tracking
+            // (up to rounding: `1 - sigma_t / majorant` cancels where the density nears its
+            // cell's bound), which never exceeds 1 / (1 - alpha) either.
+            if f.event != GuidedEvent::Absorb {
+                assert!((f.weight.x - f.gain).abs() <= 1e-2 * f.gain, "{what}: {f:?}");
+                assert!(f.gain <= 1.0 / (1.0 - alpha) * (1.0 + 1e-5), "{what}: {f:?}");
+            }
             let w = f64::from(f.weight.x);
             let (p, s) = match f.event {
                 GuidedEvent::Pass => (w, 0.0),
@@ -690,4 +716,81 @@ fn training_continuations_learn_the_light_found_by_later_next_event_estimates() 
     // Direct light goes to the direct-fluence records, not to the field's samples: every
     // sample is a continuation, with a phase or BSDF density, never a light's.
     assert!(samples.iter().all(|x| x.pdf.is_finite() && x.pdf > 0.0));
+}
+
+/// A directional cache that insists all light comes from a narrow cone about +z (uniform in the
+/// cone): guided directions then weigh 0.2 phase / (0.8 p_cone + 0.2 phase), about 5, whenever
+/// the standard branch picks a direction outside it.
+struct Cone {
+    cos_max: f32,
+}
+
+impl Cone {
+    fn density(&self) -> f32 {
+        1.0 / (2.0 * std::f32::consts::PI * (1.0 - self.cos_max))
+    }
+}
+
+impl RadianceCache for Cone {
+    fn load(&mut self, _: Vec3A, _: f32) -> bool {
+        true
+    }
+    fn incident(&self, _: Vec3A) -> f32 {
+        1.0
+    }
+    fn mean_radiance(&self) -> f32 {
+        1.0
+    }
+    fn inscattered(&self, _: Vec3A, _: f32) -> f32 {
+        1.0
+    }
+    fn product_hg(&mut self, _: Vec3A, _: f32) -> bool {
+        true
+    }
+    fn product_cosine(&mut self, _: Vec3A) -> bool {
+        true
+    }
+    fn sample(&self, u: Vec2) -> (Vec3A, f32) {
+        let z = 1.0 - u.x * (1.0 - self.cos_max);
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let phi = 2.0 * std::f32::consts::PI * u.y;
+        (Vec3A::new(r * phi.cos(), r * phi.sin(), z), self.density())
+    }
+    fn pdf(&self, w: Vec3A) -> f32 {
+        if w.z >= self.cos_max { self.density() } else { 0.0 }
+    }
+}
+
+#[test]
+fn guided_directions_without_windows_stop_compounding_their_weights() {
+    // In the infinite glow every direction brings the same radiance, so the cone's guidance is
+    // useless and each pick outside it weighs about 5. Without weight windows those factors
+    // compound along the path; once they pass MAX_GUIDED_GAIN the path samples unguided, so no
+    // sample exceeds the unguided bound (L_e: every weight of the unguided walk is at most 1
+    // before roulette) by more than MAX_GUIDED_GAIN / (1 - MAX_ALPHA), and the mean stays L_e.
+    let s = infinite_glow(0.95);
+    let guide = Components { directions: true, ..Components::OFF };
+    let settings = WalkSettings { max_depth: None, rr_depth: 1000, guide, alpha: 1.0 };
+    let mut cache = Cone { cos_max: 0.95 };
+    let mut estimate = MeanEstimate::default();
+    let mut largest = 0.0f32;
+    for i in 0..40_000 {
+        let mut sampler = Sampler::new(5, 0, i);
+        let ray = s.camera().ray(sampler.next_2d() * 4.0);
+        let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None };
+        let l = walk::radiance(
+            &settings,
+            &s,
+            ray,
+            s.camera_medium(),
+            &mut ctx,
+            &mut sampler,
+            &mut Counters::default(),
+        );
+        largest = largest.max(l.max_element());
+        estimate.push(f64::from(l.x));
+    }
+    let bound = 3.0 * walk::MAX_GUIDED_GAIN / (1.0 - walk::MAX_ALPHA);
+    assert!(largest <= bound, "a sample of {largest}, above {bound}");
+    estimate.assert_matches(3.0, 4.5, "guided directions in the glow");
 }

@@ -91,6 +91,10 @@ pub struct GuidedFlight {
     pub weight: Spectrum,
     /// Emitted radiance collected, already multiplied by the incoming throughput.
     pub emitted: Spectrum,
+    /// The standard strategy's density of this flight over the mixture's: how much guiding
+    /// multiplied the weight relative to standard tracking (1 when the flight was not
+    /// guided). The walk stops guiding paths whose guided decisions compounded too much.
+    pub gain: f32,
 }
 
 impl GuidedDistance {
@@ -307,6 +311,25 @@ impl GuidedDistance {
         0.0
     }
 
+    /// The standard strategy's density at `t` (`None`: its probability of passing) over the
+    /// mixture's, for a `t` that [`sample`](Self::sample) returned.
+    pub fn standard_over_mixture(&self, t: Option<f32>) -> f32 {
+        let (mut g, mut s) = (1.0f32, 1.0f32);
+        for (k, seg) in self.segments[..self.count].iter().enumerate() {
+            if let Some(t) = t
+                && t >= seg.start
+                && (t < seg.start + seg.length || k + 1 == self.count)
+            {
+                let mix = self.alpha * g * seg.p_guided + (1.0 - self.alpha) * s * seg.p_std;
+                return if mix > 0.0 { s * seg.p_std / mix } else { 0.0 };
+            }
+            g *= 1.0 - seg.p_guided;
+            s *= 1.0 - seg.p_std;
+        }
+        let mix = self.alpha * g + (1.0 - self.alpha) * s;
+        if mix > 0.0 { s / mix } else { 0.0 }
+    }
+
     /// The mixture probability of passing the end of the ray.
     pub fn pass_probability(
         &mut self,
@@ -338,8 +361,12 @@ pub fn guided_flight(
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> GuidedFlight {
-    let pass =
-        GuidedFlight { event: GuidedEvent::Pass, weight: Spectrum::ONE, emitted: Spectrum::ZERO };
+    let pass = GuidedFlight {
+        event: GuidedEvent::Pass,
+        weight: Spectrum::ONE,
+        emitted: Spectrum::ZERO,
+        gain: 1.0,
+    };
     let lookup_u = sampler.next_1d();
     if let MediumKind::Heterogeneous(_) = &medium.kind {
         let Some(r) = MediumRay::new(medium, ray, t_max) else { return pass };
@@ -367,25 +394,27 @@ pub fn guided_flight(
             crate::tracking::FlightEvent::Scatter { t } => GuidedEvent::Scatter { t },
             crate::tracking::FlightEvent::Escape => GuidedEvent::Pass,
         };
-        return GuidedFlight { event, weight: f.weight, emitted: f.emitted };
+        return GuidedFlight { event, weight: f.weight, emitted: f.emitted, gain: 1.0 };
     }
     let Some(mut dist) = GuidedDistance::new(medium, ray, t_max, beta, alpha, lookup_u) else {
         return pass;
     };
     let (t, pdf) = dist.sample(medium, cache, sampler, counters);
+    let gain = dist.standard_over_mixture(t);
     let tr = |t: f32, sampler: &mut Sampler, counters: &mut Counters| match &medium.kind {
         MediumKind::Homogeneous { sigma_t, .. } => transmittance_homogeneous(*sigma_t, t),
         MediumKind::Heterogeneous(_) => transmittance(medium, ray, t, sampler, counters),
     };
     let Some(t) = t else {
         let weight = if pdf > 0.0 { tr(t_max, sampler, counters) / pdf } else { Spectrum::ZERO };
-        return GuidedFlight { weight, ..pass };
+        return GuidedFlight { weight, gain, ..pass };
     };
     if !positive(pdf) {
         return GuidedFlight {
             event: GuidedEvent::Absorb,
             weight: Spectrum::ZERO,
             emitted: Spectrum::ZERO,
+            gain: 1.0,
         };
     }
     let x = ray.at(t);
@@ -401,6 +430,7 @@ pub fn guided_flight(
             event: GuidedEvent::Scatter { t },
             weight: w * sigma_s,
             emitted: Spectrum::ZERO,
+            gain,
         };
     }
     // Absorb or scatter, in proportion to what each brings back (the zero-variance choice):
@@ -422,12 +452,18 @@ pub fn guided_flight(
     };
     if sampler.next_1d() < p_absorb {
         let emitted = beta * w * sigma_a * medium.emission / p_absorb;
-        return GuidedFlight { event: GuidedEvent::Absorb, weight: Spectrum::ZERO, emitted };
+        return GuidedFlight {
+            event: GuidedEvent::Absorb,
+            weight: Spectrum::ZERO,
+            emitted,
+            gain: 1.0,
+        };
     }
     GuidedFlight {
         event: GuidedEvent::Scatter { t },
         weight: w * sigma_s / (1.0 - p_absorb),
         emitted: Spectrum::ZERO,
+        gain,
     }
 }
 
@@ -471,6 +507,10 @@ fn null_collision_flight(
         // this prefix: its weight is zero, never NaN.
         if w.is_finite() { w } else { Spectrum::ZERO }
     };
+    let gain = |ratio: f32| {
+        let g = 1.0 / (alpha * ratio + (1.0 - alpha));
+        if g.is_finite() { g } else { 0.0 }
+    };
     let mut emitted = Spectrum::ZERO;
     // Tentative collisions at each coarse cell's own majorant (the bound grid the standard
     // trackers use): any rate that bounds the extinction keeps the weights exact, and a tight
@@ -503,6 +543,7 @@ fn null_collision_flight(
                     event: GuidedEvent::Absorb,
                     weight: Spectrum::ZERO,
                     emitted,
+                    gain: 1.0,
                 };
             }
             let p_std = ps / (ps + pn);
@@ -527,14 +568,15 @@ fn null_collision_flight(
                 standard *= sigma_s / (majorant * p_std);
                 ratio *= p_guided / p_std;
                 let weight = mixture(standard, ratio);
-                return GuidedFlight { event: GuidedEvent::Scatter { t }, weight, emitted };
+                let gain = gain(ratio);
+                return GuidedFlight { event: GuidedEvent::Scatter { t }, weight, emitted, gain };
             }
             standard *= sigma_n / (majorant * (1.0 - p_std));
             ratio *= (1.0 - p_guided) / (1.0 - p_std);
         }
     }
     let weight = mixture(standard, ratio);
-    GuidedFlight { event: GuidedEvent::Pass, weight, emitted }
+    GuidedFlight { event: GuidedEvent::Pass, weight, emitted, gain: gain(ratio) }
 }
 
 #[inline]

@@ -37,6 +37,19 @@ const WINDOW_RR_DEPTH: u32 = 256;
 /// weight compounding without bound; with 20% no guided weight exceeds five standard ones.
 pub const MAX_ALPHA: f32 = 0.8;
 
+/// Without weight windows, the largest factor by which a path's guided decisions may have
+/// multiplied its weight, relative to standard sampling, for it to go on guided. Each
+/// decision's factor is at most `1 / (1 - alpha)`, but along a deep path they compound (a
+/// dense cloud walks dozens of vertices) into rare, huge weights; past this the path samples
+/// as if unguided, so its guided decisions never multiply its weight by more than
+/// `MAX_GUIDED_GAIN / (1 - alpha)`. The switch depends on the path's past alone, which keeps
+/// every estimator unbiased. Weight windows split such paths instead (and with them the bound
+/// cost 6-9% of full guiding's equal-spp error on the light shaft and the occluded light).
+/// Measured on the tests' cloud (g 0.8, directions alone at alpha 0.8, 48 seeds of 256 spp):
+/// the spread of a quadrant's mean fell from 0.0075 to 0.0027 (unguided: 0.0024); back-lit
+/// cloud, directions alone, 32 spp: relMSE 2.5 before, 0.86 with it, against 0.61 unguided.
+pub const MAX_GUIDED_GAIN: f32 = 8.0;
+
 /// Settings of the walk.
 #[derive(Clone, Copy, Debug)]
 pub struct WalkSettings {
@@ -78,6 +91,9 @@ struct PathState {
     eta: f32,
     depth: u32,
     prev: Previous,
+    /// How much the path's guided decisions have multiplied its weight relative to standard
+    /// sampling (the product of standard over mixture densities).
+    guided_gain: f32,
 }
 
 /// Split copies waiting to be traced, and how many walks this camera sample has made.
@@ -98,7 +114,8 @@ pub fn radiance<C: RadianceCache>(
     counters: &mut Counters,
 ) -> Spectrum {
     let prev = Previous { position: ray.origin, pdf: 1.0, delta: true };
-    let state = PathState { ray, medium, beta: Spectrum::ONE, eta: 1.0, depth: 0, prev };
+    let state =
+        PathState { ray, medium, beta: Spectrum::ONE, eta: 1.0, depth: 0, prev, guided_gain: 1.0 };
     let mut branches = Branches { stack: [state; STACK], pending: 1, walks: 1 };
     let mut l = Spectrum::ZERO;
     counters.paths += 1;
@@ -122,7 +139,6 @@ fn walk<C: RadianceCache>(
     counters: &mut Counters,
 ) -> Spectrum {
     let guide = settings.guide;
-    let alpha = settings.alpha.min(MAX_ALPHA);
     let window_rr = guide.roulette && ctx.pixel.is_some();
     let mut l = Spectrum::ZERO;
     let mut nulls = 0u32;
@@ -131,13 +147,22 @@ fn walk<C: RadianceCache>(
         let hit = scene.intersect(&s.ray, f32::INFINITY);
         let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
 
+        // Guided decisions mix with standard sampling at `alpha`; without weight windows to
+        // split heavy paths, only until they have compounded the path's weight past
+        // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.
+        let alpha = if window_rr || s.guided_gain < MAX_GUIDED_GAIN {
+            settings.alpha.min(MAX_ALPHA)
+        } else {
+            0.0
+        };
         if let Some(m) = s.medium {
             let mi = m as usize;
             let medium = &scene.media[mi];
-            let (scatter_t, weight, emitted) = if guide.distances {
+            let (scatter_t, weight, emitted) = if guide.distances && alpha > 0.0 {
                 let f = guided_flight(
                     medium, &s.ray, t_max, s.beta, alpha, ctx.cache, sampler, counters,
                 );
+                s.guided_gain *= f.gain;
                 match f.event {
                     GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted),
                     GuidedEvent::Pass => (None, f.weight, f.emitted),
@@ -176,7 +201,8 @@ fn walk<C: RadianceCache>(
                 let dir = s.ray.direction;
                 let g = phase.mean_cosine();
                 let loaded = guide.any() && ctx.cache.load(p, sampler.next_1d());
-                let product = guide.directions && loaded && ctx.cache.product_hg(dir, g);
+                let product =
+                    guide.directions && alpha > 0.0 && loaded && ctx.cache.product_hg(dir, g);
                 counters.field_lookups += u64::from(loaded);
                 if product && g.abs() >= EXACT_PRODUCT_MIN_G {
                     counters.products += 1;
@@ -213,6 +239,7 @@ fn walk<C: RadianceCache>(
                     break;
                 }
                 s.beta *= weight;
+                s.guided_gain *= weight;
                 record_vertex(ctx, p, wi, pdf, s.beta, true, &direct);
                 s.ray = Ray::new(p, wi);
                 s.prev = Previous { position: p, pdf, delta: false };
@@ -273,10 +300,14 @@ fn walk<C: RadianceCache>(
         let smooth = bsdf.has_smooth_component();
         let loaded = smooth && guide.any() && ctx.cache.load(hit.p, sampler.next_1d());
         counters.field_lookups += u64::from(loaded);
-        let product = guide.directions && loaded && ctx.cache.product_cosine(hit.ns);
+        let product = guide.directions && alpha > 0.0 && loaded && ctx.cache.product_cosine(hit.ns);
         let mix_pdf = |cache: &C, wi: Vec3A| {
             let pb = bsdf.pdf(wo, frame.to_local(wi));
             if product { alpha * cache.pdf(wi) + (1.0 - alpha) * pb } else { pb }
+        };
+        // BSDF sampling's density over the mixture's at `wi`.
+        let gain_at = |wi: Vec3A, pdf: f32| {
+            if product && pdf > 0.0 { bsdf.pdf(wo, frame.to_local(wi)) / pdf } else { 1.0 }
         };
         let mut direct = DirectSample::NONE;
         if smooth {
@@ -291,6 +322,7 @@ fn walk<C: RadianceCache>(
             let (wi, _) = ctx.cache.sample(sampler.next_2d());
             let pdf = mix_pdf(ctx.cache, wi);
             let f = bsdf.eval(wo, frame.to_local(wi), hit.uv);
+            s.guided_gain *= gain_at(wi, pdf);
             (wi, if pdf > 0.0 { f / pdf } else { Spectrum::ZERO }, pdf, false, 1.0)
         } else {
             // Reuse u1 rescaled so the standard branch sees a uniform number too.
@@ -300,6 +332,7 @@ fn walk<C: RadianceCache>(
             if product && !bs.delta {
                 let pdf = mix_pdf(ctx.cache, wi);
                 let f = bsdf.eval(wo, bs.wi, hit.uv);
+                s.guided_gain *= gain_at(wi, pdf);
                 (wi, f / pdf, pdf, false, bs.eta)
             } else {
                 (wi, bs.weight, bs.pdf, bs.delta, bs.eta)
