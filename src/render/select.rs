@@ -81,7 +81,7 @@ pub(crate) fn cost(c: &Counters) -> f64 {
 /// and weight-window roulette alone when they include it with more. Roulette alone costs a
 /// field lookup per vertex where guided distances and product directions cost several, and
 /// in dense, bright media it gives most of their gain (back-lit cloud, 20 s each: error ratio
-/// 1.85 for roulette alone, 1.07 with everything guided).
+/// 1.85 for roulette alone, 0.94-1.15 with everything guided).
 fn candidates(requested: Components) -> Vec<Components> {
     let mut list = vec![requested];
     if requested.roulette && (requested.directions || requested.distances) {
