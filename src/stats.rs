@@ -17,8 +17,9 @@ pub struct Counters {
     pub surface_scatters: u64,
     /// Density lookups by trackers.
     pub density_lookups: u64,
-    /// The part of `density_lookups` made by guided flights in heterogeneous media (which
-    /// step by the medium's global majorant, without a majorant grid to walk).
+    /// The part of `density_lookups` made by guided flights in heterogeneous media, counted
+    /// apart because their cost per lookup differs from the trackers' (the cost model of
+    /// adaptive guiding weighs them separately).
     pub guided_density_lookups: u64,
     /// Samples that came out NaN or infinite and were dropped.
     pub invalid_samples: u64,
