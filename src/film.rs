@@ -1,5 +1,6 @@
 //! The film: per-pixel running sums in f64 (so millions of samples do not lose precision) of
-//! RGB and of squared luminance, giving the image and a per-pixel variance estimate.
+//! RGB and of squared and cubed luminance, giving the image and per-pixel variance (and
+//! skewness) estimates.
 
 use crate::math::{Spectrum, luminance};
 
@@ -10,6 +11,8 @@ pub struct PixelSum {
     pub rgb: [f64; 3],
     /// Sum of squared luminance.
     pub lum_sq: f64,
+    /// Sum of cubed luminance (the skewness of a pixel's samples, for statistical tests).
+    pub lum_cube: f64,
     /// Sum of squared RGB samples.
     pub rgb_sq: [f64; 3],
     /// Number of samples.
@@ -26,6 +29,7 @@ impl PixelSum {
         }
         let l = luminance(c) as f64;
         self.lum_sq += l * l;
+        self.lum_cube += l * l * l;
         self.count += 1;
     }
 
@@ -36,6 +40,7 @@ impl PixelSum {
             self.rgb_sq[i] += o.rgb_sq[i];
         }
         self.lum_sq += o.lum_sq;
+        self.lum_cube += o.lum_cube;
         self.count += o.count;
     }
 
