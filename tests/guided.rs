@@ -113,8 +113,8 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
                 .map(|_| {
                     let (d, c) = &mut *state.borrow_mut();
                     match d.sample(&medium, c, &mut sampler, &mut Counters::default()) {
-                        (Some(t), _) => t as f64,
-                        (None, _) => -1.0,
+                        (Some(t), ..) => t as f64,
+                        (None, ..) => -1.0,
                     }
                 })
                 .collect();
@@ -129,12 +129,12 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
             for _ in 0..200 {
                 let (d, c) = &mut *state.borrow_mut();
                 let counters = &mut Counters::default();
-                let (t, mix) = d.sample(&medium, c, &mut sampler, counters);
+                let (t, mix, share) = d.sample(&medium, c, &mut sampler, counters);
                 let expected = match t {
                     Some(t) => standard.pdf(t, &medium, c, counters),
                     None => standard.pass_probability(&medium, c, counters),
                 };
-                let got = d.standard_over_mixture(t) * mix;
+                let got = share * mix;
                 assert!(
                     (got - expected).abs() <= 1e-5 * expected,
                     "{text}, alpha {alpha}, {t:?}: {got} vs {expected}"

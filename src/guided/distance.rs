@@ -249,15 +249,18 @@ impl GuidedDistance {
         density.element_sum() / s.mass.dot(s.collide)
     }
 
-    /// Samples a collision distance, or `None` for passing the end of the ray; returns the
-    /// mixture density of the distance, or the mixture probability of passing.
+    /// Samples a collision distance, or `None` for passing the end of the ray; returns it with
+    /// the mixture density of the distance (or the mixture probability of passing) and the
+    /// standard strategy's density (or probability) over the mixture's.
     pub fn sample(
         &mut self,
         medium: &Medium,
         cache: &mut impl RadianceCache,
         sampler: &mut Sampler,
         counters: &mut Counters,
-    ) -> (Option<f32>, f32) {
+    ) -> (Option<f32>, f32, f32) {
+        // The standard strategy's density over the mixture's, zero where the mixture has none.
+        let standard_share = |standard: f32, mix: f32| if mix > 0.0 { standard / mix } else { 0.0 };
         let guided = sampler.next_1d() < self.alpha;
         let (mut g, mut s) = (1.0f32, 1.0f32);
         for k in 0..self.count {
@@ -281,12 +284,14 @@ impl GuidedDistance {
                 let x =
                     (-(-u * seg.collide[c]).ln_1p() / self.sigma[c]).min(seg.length * (1.0 - 1e-6));
                 let mix = self.alpha * g * seg.p_guided + (1.0 - self.alpha) * s * seg.p_std;
-                return (Some(seg.start + x), mix * self.offset_pdf(k, x));
+                let t = seg.start + x;
+                return (Some(t), mix * self.offset_pdf(k, x), standard_share(s * seg.p_std, mix));
             }
             g *= 1.0 - seg.p_guided;
             s *= 1.0 - seg.p_std;
         }
-        (None, self.alpha * g + (1.0 - self.alpha) * s)
+        let mix = self.alpha * g + (1.0 - self.alpha) * s;
+        (None, mix, standard_share(s, mix))
     }
 
     /// The mixture density of colliding at `t` (for tests and MIS).
@@ -309,25 +314,6 @@ impl GuidedDistance {
             s *= 1.0 - seg.p_std;
         }
         0.0
-    }
-
-    /// The standard strategy's density at `t` (`None`: its probability of passing) over the
-    /// mixture's, for a `t` that [`sample`](Self::sample) returned.
-    pub fn standard_over_mixture(&self, t: Option<f32>) -> f32 {
-        let (mut g, mut s) = (1.0f32, 1.0f32);
-        for (k, seg) in self.segments[..self.count].iter().enumerate() {
-            if let Some(t) = t
-                && t >= seg.start
-                && (t < seg.start + seg.length || k + 1 == self.count)
-            {
-                let mix = self.alpha * g * seg.p_guided + (1.0 - self.alpha) * s * seg.p_std;
-                return if mix > 0.0 { s * seg.p_std / mix } else { 0.0 };
-            }
-            g *= 1.0 - seg.p_guided;
-            s *= 1.0 - seg.p_std;
-        }
-        let mix = self.alpha * g + (1.0 - self.alpha) * s;
-        if mix > 0.0 { s / mix } else { 0.0 }
     }
 
     /// The mixture probability of passing the end of the ray.
@@ -399,8 +385,7 @@ pub fn guided_flight(
     let Some(mut dist) = GuidedDistance::new(medium, ray, t_max, beta, alpha, lookup_u) else {
         return pass;
     };
-    let (t, pdf) = dist.sample(medium, cache, sampler, counters);
-    let gain = dist.standard_over_mixture(t);
+    let (t, pdf, gain) = dist.sample(medium, cache, sampler, counters);
     let tr = |t: f32, sampler: &mut Sampler, counters: &mut Counters| match &medium.kind {
         MediumKind::Homogeneous { sigma_t, .. } => transmittance_homogeneous(*sigma_t, t),
         MediumKind::Heterogeneous(_) => transmittance(medium, ray, t, sampler, counters),
@@ -501,16 +486,14 @@ fn null_collision_flight(
     // standard one: the prefix's weight is `standard / (alpha ratio + 1 - alpha)`.
     let mut standard = Spectrum::ONE;
     let mut ratio = 1.0f32;
-    let mixture = |standard: Spectrum, ratio: f32| {
-        let w = standard / (alpha * ratio + (1.0 - alpha));
-        // A ratio that overflowed means the standard tracker could (all but) never have made
-        // this prefix: its weight is zero, never NaN.
-        if w.is_finite() { w } else { Spectrum::ZERO }
-    };
+    // The prefix's weight over the standard tracker's. A ratio that overflowed means the
+    // standard tracker could (all but) never have made this prefix: its weight is zero,
+    // never NaN.
     let gain = |ratio: f32| {
         let g = 1.0 / (alpha * ratio + (1.0 - alpha));
         if g.is_finite() { g } else { 0.0 }
     };
+    let mixture = |standard: Spectrum, ratio: f32| standard * gain(ratio);
     let mut emitted = Spectrum::ZERO;
     // Tentative collisions at each coarse cell's own majorant (the bound grid the standard
     // trackers use): any rate that bounds the extinction keeps the weights exact, and a tight

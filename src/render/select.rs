@@ -206,21 +206,15 @@ fn summarise(
     pilot_spp: u32,
 ) -> Selection {
     let sum = |f: fn(&TileMeasure) -> f64| measured.iter().map(f).sum::<f64>();
-    let totals = [
+    let sums = [
         sum(|m| m.guided_variance),
         sum(|m| m.unguided_variance),
         sum(|m| m.guided_cost),
         sum(|m| m.unguided_cost),
     ];
     let ratio = |a: f64, b: f64| if b > 0.0 { a / b } else { f64::NAN };
-    let chosen = measured.iter().zip(choice).fold((0.0, 0.0), |(v, c), (m, &g)| {
-        if g {
-            (v + m.guided_variance, c + m.guided_cost)
-        } else {
-            (v + m.unguided_variance, c + m.unguided_cost)
-        }
-    });
-    let gain = ratio(totals[1] * totals[3], chosen.0 * chosen.1);
+    let chosen = totals(measured, choice);
+    let gain = ratio(sums[1] * sums[3], chosen.0 * chosen.1);
     Selection {
         tiles: choice.len(),
         guided_tiles: choice.iter().filter(|&&g| g).count(),
@@ -228,12 +222,23 @@ fn summarise(
         candidates: Vec::new(),
         pilot_spp,
         seconds: 0.0,
-        cost_ratio: ratio(totals[2], totals[3]),
-        variance_ratio: ratio(totals[0], totals[1]),
+        cost_ratio: ratio(sums[2], sums[3]),
+        variance_ratio: ratio(sums[0], sums[1]),
         // A black image (no variance either way) gains nothing.
         gain: if gain.is_finite() { gain } else { 1.0 },
         stopped_training: false,
     }
+}
+
+/// The image's variance and cost (sums over tiles) when the tiles in `choice` are guided.
+fn totals(tiles: &[TileMeasure], choice: &[bool]) -> (f64, f64) {
+    tiles.iter().zip(choice).fold((0.0, 0.0), |(v, c), (m, &g)| {
+        if g {
+            (v + m.guided_variance, c + m.guided_cost)
+        } else {
+            (v + m.unguided_variance, c + m.unguided_cost)
+        }
+    })
 }
 
 /// One tile's pilot: relative variance and modelled cost of the pilot's samples, each way.
@@ -299,16 +304,7 @@ fn choose(tiles: &[TileMeasure], pooled: &[TileMeasure]) -> Vec<bool> {
         .map(|(i, m)| (dv(m) / dc(m), i))
         .collect();
     events.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    let totals = |choice: &[bool]| {
-        tiles.iter().zip(choice).fold((0.0, 0.0), |(v, c), (m, &g)| {
-            if g {
-                (v + m.guided_variance, c + m.guided_cost)
-            } else {
-                (v + m.unguided_variance, c + m.unguided_cost)
-            }
-        })
-    };
-    let (mut v, mut c) = totals(&choice);
+    let (mut v, mut c) = totals(tiles, &choice);
     let (mut best, mut best_events) = (v * c, 0);
     for (k, &(_, i)) in events.iter().enumerate() {
         let m = &tiles[i];
