@@ -8,9 +8,9 @@
 
 use crate::field::Field;
 use crate::hg::{self, HG_LOBES};
+use crate::lanes::{self, LANES};
 use crate::mixture::MAX_LOBES;
 use crate::product::{COSINE_KAPPA, LobeSet};
-use crate::vmf;
 use glam::{Vec2, Vec3};
 
 /// Lobes a product can have: every mixture lobe times every lobe of the phase-function fit.
@@ -52,8 +52,8 @@ pub enum ProductKind {
 /// ```
 #[derive(Clone, Debug)]
 pub struct VolumeDistribution {
-    base: LobeSet<MAX_LOBES>,
-    product: LobeSet<MAX_PRODUCT_LOBES>,
+    base: LobeSet<{ MAX_LOBES / LANES }>,
+    product: LobeSet<{ MAX_PRODUCT_LOBES / LANES }>,
     kind: ProductKind,
     fluence: f32,
     region: Option<u32>,
@@ -105,10 +105,8 @@ impl VolumeDistribution {
     /// `ray_dir` is the unit direction the path was travelling, `g > 0` scatters forward.
     pub fn apply_hg_product(&mut self, ray_dir: Vec3, g: f32) {
         let fit = hg::hg_vmf_fit(g);
-        let axis = ray_dir * fit.axis_sign;
-        let factor: [(Vec3, f32, f32); HG_LOBES] =
-            std::array::from_fn(|i| (axis, fit.kappa[i], fit.weight[i]));
-        self.kind = if self.product.set_product(&self.base, &factor) {
+        let factor: [(f32, f32); HG_LOBES] = std::array::from_fn(|i| (fit.kappa[i], fit.weight[i]));
+        self.kind = if self.product.set_product(&self.base, ray_dir * fit.axis_sign, &factor) {
             ProductKind::HenyeyGreenstein
         } else {
             ProductKind::Fallback
@@ -129,7 +127,7 @@ impl VolumeDistribution {
     /// [`apply_hg_product`]: Self::apply_hg_product
     pub fn apply_hg_weights(&mut self, ray_dir: Vec3, g: f32) {
         let ok = self.product.set_reweighted(&self.base, |mean, kappa| {
-            hg::hg_pdf(ray_dir.dot(mean), g * vmf::mean_cosine(kappa))
+            lanes::hg_pdf(ray_dir.dot(mean), g * lanes::mean_cosine(kappa))
         });
         self.kind = if ok { ProductKind::HenyeyGreensteinWeights } else { ProductKind::None };
     }
@@ -137,8 +135,7 @@ impl VolumeDistribution {
     /// Replaces the distribution by the normalised product of the incident-radiance mixture
     /// with the clamped cosine `max(0, dot(normal, dir))`, approximated by one vMF lobe.
     pub fn apply_cosine_product(&mut self, normal: Vec3) {
-        let factor = [(normal, COSINE_KAPPA, 1.0)];
-        self.kind = if self.product.set_product(&self.base, &factor) {
+        self.kind = if self.product.set_product(&self.base, normal, &[(COSINE_KAPPA, 1.0)]) {
             ProductKind::Cosine
         } else {
             ProductKind::Fallback
@@ -158,7 +155,7 @@ impl VolumeDistribution {
     /// a product where no lobe keeps any weight.
     pub fn apply_cosine_weights(&mut self, normal: Vec3) {
         let ok = self.product.set_reweighted(&self.base, |mean, kappa| {
-            let a = vmf::mean_cosine(kappa);
+            let a = lanes::mean_cosine(kappa);
             a * normal.dot(mean).max(0.0) + (1.0 - a) * 0.25
         });
         self.kind = if ok { ProductKind::CosineWeights } else { ProductKind::None };
@@ -230,30 +227,8 @@ impl VolumeDistribution {
             return 0.0;
         }
         let fit = hg::hg_vmf_fit(g);
-        let axis = (ray_dir * fit.axis_sign).as_dvec3();
-        let fit_norms: [f64; HG_LOBES] =
-            std::array::from_fn(|i| vmf::normalization_f64(f64::from(fit.kappa[i])));
-        let mut sum = 0.0f64;
-        for k in 0..self.base.len() {
-            let (mean, kappa, weight) = self.base.lobe(k);
-            if weight <= 0.0 {
-                continue;
-            }
-            let (m, ka) = (mean.as_dvec3(), f64::from(kappa));
-            let lin = f64::from(weight) * f64::from(self.base.norm(k));
-            let d2 = (m - axis).length_squared();
-            for ((&fk, &fw), &fn_) in fit.kappa.iter().zip(&fit.weight).zip(&fit_norms) {
-                if fw > 0.0 {
-                    // The closed-form convolution (product integral) of the two lobes.
-                    let kb = f64::from(fk);
-                    let kp = (m * ka + axis * kb).length();
-                    let denom = kp + ka + kb;
-                    let e = if denom > 0.0 { -ka * kb * d2 / denom } else { 0.0 };
-                    sum += lin * f64::from(fw) * fn_ / vmf::normalization_f64(kp) * e.exp();
-                }
-            }
-        }
-        (f64::from(self.fluence) * sum) as f32
+        let factor: [(f32, f32); HG_LOBES] = std::array::from_fn(|i| (fit.kappa[i], fit.weight[i]));
+        self.fluence * self.base.convolution(ray_dir * fit.axis_sign, &factor)
     }
 }
 

@@ -40,6 +40,7 @@ mod error;
 mod field;
 pub mod hg;
 mod io;
+mod lanes;
 mod mixture;
 pub mod product;
 mod recorder;

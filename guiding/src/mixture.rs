@@ -5,6 +5,7 @@
 //! heap allocation; each lobe's normalisation is cached because evaluating it needs `expm1`.
 
 use crate::GuidingError;
+use crate::lanes::{self, LANES};
 use crate::vmf::{self, VmfLobe};
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
@@ -126,11 +127,20 @@ impl Mixture {
     #[inline]
     pub fn pdf(&self, dir: Vec3) -> f32 {
         let n = self.len as usize;
-        self.lobes[..n]
-            .iter()
-            .zip(&self.norms[..n])
-            .map(|(l, &norm)| l.weight * norm * (l.kappa * vmf::cos_minus_one(l.mean, dir)).exp())
-            .sum()
+        let mut sum = [0.0f32; LANES];
+        for (lobes, norms) in self.lobes[..n].chunks(LANES).zip(self.norms[..n].chunks(LANES)) {
+            // The exponents lobe by lobe, then the exponentials of a whole block at once.
+            let mut exponent = [0.0f32; LANES];
+            let mut weighted_norm = [0.0f32; LANES];
+            for (j, (l, &norm)) in lobes.iter().zip(norms).enumerate() {
+                exponent[j] = l.kappa * vmf::cos_minus_one(l.mean, dir);
+                weighted_norm[j] = l.weight * norm;
+            }
+            for j in 0..LANES {
+                sum[j] += weighted_norm[j] * lanes::exp(exponent[j]);
+            }
+        }
+        sum.iter().sum()
     }
 
     /// Draws a direction: `u.x` picks the lobe and is then reused, rescaled, for the lobe.

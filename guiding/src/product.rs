@@ -10,9 +10,14 @@
 //! until the weights of a whole product mixture are normalised, so opposing sharp lobes whose
 //! product integral underflows every float still give a usable, normalised mixture.
 
+// Lane loops index several arrays in step, the form the vectoriser turns into vector code.
+#![allow(clippy::needless_range_loop)]
+
+use crate::lanes::{self, LANES};
 use crate::mixture::{ONE_BELOW, pick};
 use crate::vmf;
 use glam::{DVec3, Vec2, Vec3};
+use std::f32::consts::PI;
 
 /// The product lobe of two vMF lobes and the logarithm of the integral of their product.
 ///
@@ -43,144 +48,238 @@ pub fn vmf_product_integral(mean_a: Vec3, kappa_a: f32, mean_b: Vec3, kappa_b: f
 /// shape is the least-squares fit that Open PGL also uses.
 pub const COSINE_KAPPA: f32 = 2.188_53;
 
-/// Most lobes the second factor of a product may have (a phase-function fit or a cosine).
-const MAX_FACTOR_LOBES: usize = 8;
+/// One block of [`LANES`] lobes in structure-of-arrays form, the unit the lane-wise loops
+/// work on. Lanes past a set's length carry zero weight (and a valid uniform lobe), so whole
+/// blocks can be evaluated without masks.
+#[derive(Clone, Copy, Debug)]
+struct Block {
+    x: [f32; LANES],
+    y: [f32; LANES],
+    z: [f32; LANES],
+    kappa: [f32; LANES],
+    weight: [f32; LANES],
+    norm: [f32; LANES],
+    /// `weight * norm`, the factor in front of the exponential in the density.
+    weighted_norm: [f32; LANES],
+}
 
-/// A fixed-capacity set of weighted vMF lobes in structure-of-arrays form, with the weight
-/// and the normalisation multiplied together for evaluation.
+impl Block {
+    const EMPTY: Block = Block {
+        x: [0.0; LANES],
+        y: [0.0; LANES],
+        z: [1.0; LANES],
+        kappa: [0.0; LANES],
+        weight: [0.0; LANES],
+        norm: [0.0; LANES],
+        weighted_norm: [0.0; LANES],
+    };
+
+    #[inline]
+    fn set(&mut self, j: usize, mean: Vec3, kappa: f32, weight: f32, norm: f32) {
+        (self.x[j], self.y[j], self.z[j]) = (mean.x, mean.y, mean.z);
+        self.kappa[j] = kappa;
+        self.weight[j] = weight;
+        self.norm[j] = norm;
+        self.weighted_norm[j] = weight * norm;
+    }
+
+    #[inline]
+    fn mean(&self, j: usize) -> Vec3 {
+        Vec3::new(self.x[j], self.y[j], self.z[j])
+    }
+}
+
+/// The product, lane by lane, of a block of lobes with one lobe about `axis` of
+/// concentration `kb`: the product lobes' unnormalised means `kappa' m'`, their
+/// concentrations, the exponents of the product integrals (`-inf` for lanes without weight)
+/// and the reciprocals of the product lobes' normalisations.
+#[derive(Clone, Copy)]
+struct BlockProduct {
+    sx: [f32; LANES],
+    sy: [f32; LANES],
+    sz: [f32; LANES],
+    kappa: [f32; LANES],
+    exponent: [f32; LANES],
+    inv_norm: [f32; LANES],
+}
+
+impl BlockProduct {
+    /// `-ka kb |m - axis|^2 / (k' + ka + kb)` is the product integral's exponent in the form
+    /// free of cancellation; `1 / N(k') = 4 pi (1 - e^{-2k'}) / (2k')`.
+    #[inline(always)]
+    fn new(b: &Block, axis: Vec3, kb: f32) -> Self {
+        let mut p = BlockProduct {
+            sx: [0.0; LANES],
+            sy: [0.0; LANES],
+            sz: [0.0; LANES],
+            kappa: [0.0; LANES],
+            exponent: [0.0; LANES],
+            inv_norm: [0.0; LANES],
+        };
+        for j in 0..LANES {
+            let ka = b.kappa[j];
+            let sx = b.x[j] * ka + axis.x * kb;
+            let sy = b.y[j] * ka + axis.y * kb;
+            let sz = b.z[j] * ka + axis.z * kb;
+            let k = (sx * sx + sy * sy + sz * sz).sqrt();
+            (p.sx[j], p.sy[j], p.sz[j]) = (sx, sy, sz);
+            let (dx, dy, dz) = (b.x[j] - axis.x, b.y[j] - axis.y, b.z[j] - axis.z);
+            let denom = k + ka + kb;
+            let e = -ka * kb * (dx * dx + dy * dy + dz * dz) / denom.max(f32::MIN_POSITIVE);
+            p.kappa[j] = k;
+            p.exponent[j] = if b.weight[j] > 0.0 { e } else { f32::NEG_INFINITY };
+            p.inv_norm[j] = 4.0 * PI * lanes::one_minus_exp_neg_over(2.0 * k);
+        }
+        p
+    }
+}
+
+/// A fixed-capacity set of weighted vMF lobes: `B` blocks of [`LANES`] lobes.
 #[derive(Clone, Debug)]
-pub(crate) struct LobeSet<const N: usize> {
-    mean: [Vec3; N],
-    kappa: [f32; N],
-    weight: [f32; N],
-    norm: [f32; N],
-    weighted_norm: [f32; N],
+pub(crate) struct LobeSet<const B: usize> {
+    blocks: [Block; B],
     len: usize,
 }
 
-impl<const N: usize> Default for LobeSet<N> {
+impl<const B: usize> Default for LobeSet<B> {
     fn default() -> Self {
-        let mut s = Self {
-            mean: [Vec3::Z; N],
-            kappa: [0.0; N],
-            weight: [0.0; N],
-            norm: [0.0; N],
-            weighted_norm: [0.0; N],
-            len: 0,
-        };
+        let mut s = Self { blocks: [Block::EMPTY; B], len: 0 };
         s.set_uniform();
         s
     }
 }
 
-impl<const N: usize> LobeSet<N> {
+impl<const B: usize> LobeSet<B> {
+    /// Most lobes the set holds.
+    pub(crate) const CAPACITY: usize = B * LANES;
+
     pub(crate) fn set_uniform(&mut self) {
+        self.blocks[0] = Block::EMPTY;
+        self.blocks[0].set(0, Vec3::Z, 0.0, 1.0, vmf::normalization(0.0));
         self.len = 1;
-        self.mean[0] = Vec3::Z;
-        self.kappa[0] = 0.0;
-        self.weight[0] = 1.0;
-        self.norm[0] = vmf::normalization(0.0);
-        self.weighted_norm[0] = self.norm[0];
     }
 
+    /// The number of lanes in use (lobes, and lanes of zero weight between them).
+    #[cfg(test)]
     pub(crate) fn len(&self) -> usize {
         self.len
     }
 
-    pub(crate) fn lobe(&self, k: usize) -> (Vec3, f32, f32) {
-        (self.mean[k], self.kappa[k], self.weight[k])
+    fn blocks_used(&self) -> usize {
+        self.len.div_ceil(LANES)
     }
 
-    /// The normalisation of lobe `k`.
-    pub(crate) fn norm(&self, k: usize) -> f32 {
-        self.norm[k]
+    /// Gives the lanes from `len` to the end of their block zero weight.
+    fn clear_tail(&mut self) {
+        if let Some(b) = self.blocks.get_mut(self.len / LANES) {
+            for j in self.len % LANES..LANES {
+                b.set(j, Vec3::Z, 0.0, 0.0, 0.0);
+            }
+        }
+    }
+
+    /// Lobe `k` as (mean, kappa, weight).
+    #[cfg(test)]
+    pub(crate) fn lobe(&self, k: usize) -> (Vec3, f32, f32) {
+        let (b, j) = (&self.blocks[k / LANES], k % LANES);
+        (b.mean(j), b.kappa[j], b.weight[j])
     }
 
     /// Copies a mixture (weights summing to one, normalisations cached).
     pub(crate) fn set_from(&mut self, mixture: &crate::Mixture) {
-        let n = mixture.len().min(N);
+        let n = mixture.len().min(Self::CAPACITY);
         for (k, (l, &norm)) in mixture.lobes()[..n].iter().zip(mixture.norms()).enumerate() {
-            self.mean[k] = l.mean;
-            self.kappa[k] = l.kappa;
-            self.weight[k] = l.weight;
-            self.norm[k] = norm;
-            self.weighted_norm[k] = l.weight * norm;
+            self.blocks[k / LANES].set(k % LANES, l.mean, l.kappa, l.weight, norm);
         }
         self.len = n;
+        self.clear_tail();
     }
 
-    /// Sets this set to the normalised product of `base` with the mixture `factor` (lobes
-    /// given as mean, kappa, weight). Returns false, leaving the set as `factor` alone, when
-    /// the product has no usable weight (only possible for corrupt input).
+    /// Sets this set to the normalised product of `base` with the mixture `factor` of lobes
+    /// about one `axis` (given as kappa, weight). Returns false, leaving the set as `factor`
+    /// alone, when the product has no usable weight (only possible for corrupt input).
     ///
     /// Each product weight is `w_k w_i N_k N_i / N(k') exp(e)`, `e` the (non-positive)
-    /// exponent of the product integral. The factors before `exp` stay within f64 range for
+    /// exponent of the product integral. The factors before `exp` stay within f32 range for
     /// any kappa up to 1e6, so only `exp(e)` could underflow: it is taken relative to the
-    /// largest exponent, which makes the largest term exactly representable.
+    /// largest exponent, which makes the largest term exactly representable. Lanes without
+    /// weight in `base` give lanes without weight here.
     pub(crate) fn set_product<const M: usize>(
         &mut self,
         base: &LobeSet<M>,
-        factor: &[(Vec3, f32, f32)],
+        axis: Vec3,
+        factor: &[(f32, f32)],
     ) -> bool {
-        let mut linear = [0.0f64; N];
-        let mut exponent = [0.0f64; N];
-        let mut max = f64::NEG_INFINITY;
-        let mut n = 0;
-        debug_assert!(factor.len() <= MAX_FACTOR_LOBES);
-        let factor_norms: [f64; MAX_FACTOR_LOBES] = std::array::from_fn(|i| {
-            factor.get(i).map_or(0.0, |f| vmf::normalization_f64(f64::from(f.1)))
-        });
-        for k in 0..base.len {
-            if base.weight[k] <= 0.0 {
-                continue;
-            }
-            let (ma, ka) = (base.mean[k].as_dvec3(), f64::from(base.kappa[k]));
-            let lin_base = f64::from(base.weight[k]) * f64::from(base.norm[k]);
-            for (i, &(fm, fk, fw)) in factor.iter().enumerate().take(MAX_FACTOR_LOBES) {
-                if fw <= 0.0 || n == N {
-                    continue;
+        let mut exponent = [[f32::NEG_INFINITY; LANES]; B];
+        let mut lane_max = [f32::NEG_INFINITY; LANES];
+        let mut out = 0;
+        for &(kb, fw) in factor.iter().filter(|f| f.1 > 0.0) {
+            let factor_lin = fw / (4.0 * PI * lanes::one_minus_exp_neg_over(2.0 * kb));
+            for b in &base.blocks[..base.blocks_used()] {
+                if out == B {
+                    break;
                 }
-                let (mb, kb) = (fm.as_dvec3(), f64::from(fk));
-                let sum = ma * ka + mb * kb;
-                let kp = sum.length();
-                let denom = kp + ka + kb;
-                let e =
-                    if denom > 0.0 { -ka * kb * (ma - mb).length_squared() / denom } else { 0.0 };
-                // Divisions dominate this loop (32 products per HG product): one reciprocal
-                // serves the mean and the normalisation.
-                let inv_norm = vmf::inverse_normalization_f64(kp);
-                self.mean[n] = if kp > 1e-12 * denom && kp > 0.0 {
-                    (sum * (1.0 / kp)).as_vec3()
-                } else {
-                    base.mean[k]
-                };
-                self.kappa[n] = kp as f32;
-                self.norm[n] = (1.0 / inv_norm) as f32;
-                linear[n] = lin_base * f64::from(fw) * factor_norms[i] * inv_norm;
-                exponent[n] = e;
-                max = max.max(e);
-                n += 1;
+                let p = BlockProduct::new(b, axis, kb);
+                let o = &mut self.blocks[out];
+                // Arithmetic in place of selects keeps this loop vector code.
+                for j in 0..LANES {
+                    let k = p.kappa[j];
+                    let inv_k = 1.0 / k.max(f32::MIN_POSITIVE);
+                    // A product that cancels exactly to uniform gets the axis as its mean
+                    // (any unit vector would do).
+                    let uniform = f32::from(u8::from(k <= 0.0));
+                    o.x[j] = p.sx[j] * inv_k + axis.x * uniform;
+                    o.y[j] = p.sy[j] * inv_k + axis.y * uniform;
+                    o.z[j] = p.sz[j] * inv_k + axis.z * uniform;
+                    o.kappa[j] = k;
+                    o.norm[j] = 1.0 / p.inv_norm[j];
+                    // The linear part of the weight, until the exponentials are known.
+                    o.weight[j] = b.weighted_norm[j] * factor_lin * p.inv_norm[j];
+                    lane_max[j] = lane_max[j].max(p.exponent[j]);
+                }
+                exponent[out] = p.exponent;
+                out += 1;
             }
         }
-        let mut total = 0.0;
-        for (l, &e) in linear[..n].iter_mut().zip(&exponent[..n]) {
-            // Single precision suffices: the result is a weight stored as f32, and a term whose
-            // exponent lies 87 below the largest one (where f32 underflows) weighs nothing.
-            *l *= f64::from(((e - max) as f32).exp());
-            total += *l;
+        let max = lane_max.iter().fold(f32::NEG_INFINITY, |m, &e| m.max(e));
+        let mut total = 0.0f32;
+        for (o, e) in self.blocks[..out].iter_mut().zip(&exponent) {
+            for j in 0..LANES {
+                o.weight[j] *= lanes::exp(e[j] - max);
+            }
+            total += o.weight.iter().sum::<f32>();
         }
-        if n == 0 || !(total.is_finite() && total > 0.0 && max.is_finite()) {
-            self.set_factor(factor);
+        if out == 0 || !(total.is_finite() && total > 0.0 && max.is_finite()) {
+            self.set_factor(axis, factor);
             return false;
         }
         let inv = 1.0 / total;
-        for (k, &l) in linear[..n].iter().enumerate() {
-            let w = (l * inv) as f32;
-            self.weight[k] = w;
-            self.weighted_norm[k] = w * self.norm[k];
+        for o in &mut self.blocks[..out] {
+            for j in 0..LANES {
+                o.weight[j] *= inv;
+                o.weighted_norm[j] = o.weight[j] * o.norm[j];
+            }
         }
-        self.len = n;
+        self.len = out * LANES;
         true
+    }
+
+    /// The sum over this set's lobes and the lobes of `factor` about `axis` (kappa, weight) of
+    /// `w_k w_i` times the integral of the two normalised lobes' product: the convolution of
+    /// this mixture with the factor mixture, evaluated along `axis`.
+    pub(crate) fn convolution(&self, axis: Vec3, factor: &[(f32, f32)]) -> f32 {
+        let mut sum = [0.0f32; LANES];
+        for &(kb, fw) in factor.iter().filter(|f| f.1 > 0.0) {
+            let factor_lin = fw / (4.0 * PI * lanes::one_minus_exp_neg_over(2.0 * kb));
+            for b in &self.blocks[..self.blocks_used()] {
+                let p = BlockProduct::new(b, axis, kb);
+                for j in 0..LANES {
+                    sum[j] +=
+                        b.weighted_norm[j] * factor_lin * p.inv_norm[j] * lanes::exp(p.exponent[j]);
+                }
+            }
+        }
+        sum.iter().sum()
     }
 
     /// Sets this set to the lobes of `base` with lobe `k`'s weight multiplied by
@@ -191,62 +290,74 @@ impl<const N: usize> LobeSet<N> {
         base: &LobeSet<M>,
         factor: impl Fn(Vec3, f32) -> f32,
     ) -> bool {
-        let n = base.len.min(N);
+        let blocks = base.blocks_used().min(B);
         let mut total = 0.0f32;
-        for k in 0..n {
-            let w = base.weight[k] * factor(base.mean[k], base.kappa[k]);
-            self.weight[k] = if w > 0.0 && w.is_finite() { w } else { 0.0 };
-            total += self.weight[k];
+        for (o, b) in self.blocks.iter_mut().zip(&base.blocks[..blocks]) {
+            *o = *b;
+            let mut sum = [0.0f32; LANES];
+            for j in 0..LANES {
+                let w = b.weight[j] * factor(b.mean(j), b.kappa[j]);
+                // Also drops lanes without weight, whatever the factor makes of them.
+                o.weight[j] = if w > 0.0 && w < f32::INFINITY { w } else { 0.0 };
+                sum[j] = o.weight[j];
+            }
+            total += sum.iter().sum::<f32>();
         }
         if !(total > 0.0 && total.is_finite()) {
             return false;
         }
         let inv = 1.0 / total;
-        for k in 0..n {
-            self.mean[k] = base.mean[k];
-            self.kappa[k] = base.kappa[k];
-            self.norm[k] = base.norm[k];
-            self.weight[k] *= inv;
-            self.weighted_norm[k] = self.weight[k] * self.norm[k];
+        for o in &mut self.blocks[..blocks] {
+            for j in 0..LANES {
+                o.weight[j] *= inv;
+                o.weighted_norm[j] = o.weight[j] * o.norm[j];
+            }
         }
-        self.len = n;
+        self.len = base.len.min(Self::CAPACITY);
         true
     }
 
-    fn set_factor(&mut self, factor: &[(Vec3, f32, f32)]) {
-        let total: f32 = factor.iter().map(|f| f.2.max(0.0)).sum();
+    fn set_factor(&mut self, axis: Vec3, factor: &[(f32, f32)]) {
+        let total: f32 = factor.iter().map(|f| f.1.max(0.0)).sum();
         if !(total > 0.0 && total.is_finite()) {
             self.set_uniform();
             return;
         }
-        let mut n = 0;
-        for &(m, k, w) in factor.iter().take(N) {
-            self.mean[n] = m;
-            self.kappa[n] = k;
-            self.weight[n] = w.max(0.0) / total;
-            self.norm[n] = vmf::normalization(k);
-            self.weighted_norm[n] = self.weight[n] * self.norm[n];
-            n += 1;
+        let n = factor.len().min(Self::CAPACITY);
+        for (i, &(k, w)) in factor[..n].iter().enumerate() {
+            self.blocks[i / LANES].set(
+                i % LANES,
+                axis,
+                k,
+                w.max(0.0) / total,
+                vmf::normalization(k),
+            );
         }
         self.len = n;
+        self.clear_tail();
     }
 
+    /// The density at the unit direction `dir`.
     #[inline]
     pub(crate) fn pdf(&self, dir: Vec3) -> f32 {
-        let n = self.len;
-        let mut p = 0.0;
-        for k in 0..n {
-            p += self.weighted_norm[k]
-                * (self.kappa[k] * vmf::cos_minus_one(self.mean[k], dir)).exp();
+        let mut sum = [0.0f32; LANES];
+        for b in &self.blocks[..self.blocks_used()] {
+            for j in 0..LANES {
+                let (dx, dy, dz) = (b.x[j] - dir.x, b.y[j] - dir.y, b.z[j] - dir.z);
+                // kappa (cos - 1), with cos - 1 = -|m - dir|^2 / 2 (see `vmf::cos_minus_one`).
+                let e = -0.5 * b.kappa[j] * (dx * dx + dy * dy + dz * dz);
+                sum[j] += b.weighted_norm[j] * lanes::exp(e);
+            }
         }
-        p
+        sum.iter().sum()
     }
 
     #[inline]
     pub(crate) fn sample(&self, u: Vec2) -> Vec3 {
-        let n = self.len;
-        let (k, ux) = pick(self.weight[..n].iter().copied(), n, u.x.min(ONE_BELOW));
-        vmf::sample(self.mean[k], self.kappa[k], Vec2::new(ux, u.y))
+        let weights = self.blocks.iter().flat_map(|b| b.weight).take(self.len);
+        let (k, ux) = pick(weights, self.len, u.x.min(ONE_BELOW));
+        let (b, j) = (&self.blocks[k / LANES], k % LANES);
+        vmf::sample(b.mean(j), b.kappa[j], Vec2::new(ux, u.y))
     }
 }
 
@@ -290,14 +401,14 @@ mod tests {
         let (_, k, log_i) = vmf_product(Vec3::Z, 1e6, -Vec3::Z, 1e6);
         assert_eq!(k, 0.0);
         assert!(log_i.is_finite() && log_i < -1e6);
-        let mut base = LobeSet::<4>::default();
+        let mut base = LobeSet::<1>::default();
         base.set_from(
             &crate::Mixture::new(&[vmf::VmfLobe { mean: Vec3::Z, kappa: 1e6, weight: 1.0 }])
                 .unwrap(),
         );
-        let mut prod = LobeSet::<4>::default();
-        assert!(prod.set_product(&base, &[(-Vec3::Z, 1e6, 1.0)]));
-        assert_eq!(prod.len(), 1);
+        let mut prod = LobeSet::<1>::default();
+        assert!(prod.set_product(&base, -Vec3::Z, &[(1e6, 1.0)]));
+        assert_eq!(prod.lobe(0).1, 0.0);
         assert!((prod.pdf(Vec3::X) - 1.0 / (4.0 * std::f32::consts::PI)).abs() < 1e-6);
     }
 }
