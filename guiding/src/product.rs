@@ -201,17 +201,51 @@ impl<const B: usize> LobeSet<B> {
     ///
     /// Each product weight is `w_k w_i N_k N_i / N(k') exp(e)`, `e` the (non-positive)
     /// exponent of the product integral. The factors before `exp` stay within f32 range for
-    /// any kappa up to 1e6, so only `exp(e)` could underflow: it is taken relative to the
-    /// largest exponent, which makes the largest term exactly representable. Lanes without
-    /// weight in `base` give lanes without weight here.
+    /// any kappa up to 1e6, so only `exp(e)` could underflow. Where even the largest
+    /// exponent is far below zero (lobes facing away from each other) the products are formed
+    /// again with `exp(e - max e)`, which makes the largest term exactly representable. Lanes
+    /// without weight in `base` give lanes without weight here.
     pub(crate) fn set_product<const M: usize>(
         &mut self,
         base: &LobeSet<M>,
         axis: Vec3,
         factor: &[(f32, f32)],
     ) -> bool {
-        let mut exponent = [[f32::NEG_INFINITY; LANES]; B];
+        // exp(-40) ~ 4e-18 leaves the weights' f32 range intact.
+        const SHIFT_BELOW: f32 = -40.0;
+        let (mut out, mut max, mut total) = self.fill_product(base, axis, factor, 0.0);
+        if max < SHIFT_BELOW && max.is_finite() {
+            (out, max, total) = self.fill_product(base, axis, factor, max);
+        }
+        if out == 0 || !(total.is_finite() && total > 0.0 && max.is_finite()) {
+            self.set_factor(axis, factor);
+            return false;
+        }
+        let inv = 1.0 / total;
+        for o in &mut self.blocks[..out] {
+            for j in 0..LANES {
+                o.weight[j] *= inv;
+                o.weighted_norm[j] *= inv;
+            }
+        }
+        self.len = out * LANES;
+        true
+    }
+
+    /// The products of [`set_product`](Self::set_product) with weights scaled by
+    /// `exp(-shift)` and not normalised: returns the blocks filled, the largest exponent and
+    /// the sum of the weights.
+    #[inline(always)]
+    fn fill_product<const M: usize>(
+        &mut self,
+        base: &LobeSet<M>,
+        axis: Vec3,
+        factor: &[(f32, f32)],
+        shift: f32,
+    ) -> (usize, f32, f32) {
         let mut lane_max = [f32::NEG_INFINITY; LANES];
+        // Summed lane by lane: one running sum would be a chain of dependent additions.
+        let mut lane_total = [0.0f32; LANES];
         let mut out = 0;
         for &(kb, fw) in factor.iter().filter(|f| f.1 > 0.0) {
             let factor_lin = fw / (4.0 * PI * lanes::one_minus_exp_neg_over(2.0 * kb));
@@ -233,35 +267,18 @@ impl<const B: usize> LobeSet<B> {
                     o.z[j] = p.sz[j] * inv_k + axis.z * uniform;
                     o.kappa[j] = k;
                     o.norm[j] = 1.0 / p.inv_norm[j];
-                    // The linear part of the weight, until the exponentials are known.
-                    o.weight[j] = b.weighted_norm[j] * factor_lin * p.inv_norm[j];
+                    // weight * norm: the product lobe's normalisation cancels.
+                    let wn = b.weighted_norm[j] * factor_lin * lanes::exp(p.exponent[j] - shift);
+                    o.weighted_norm[j] = wn;
+                    o.weight[j] = wn * p.inv_norm[j];
                     lane_max[j] = lane_max[j].max(p.exponent[j]);
+                    lane_total[j] += o.weight[j];
                 }
-                exponent[out] = p.exponent;
                 out += 1;
             }
         }
         let max = lane_max.iter().fold(f32::NEG_INFINITY, |m, &e| m.max(e));
-        let mut total = 0.0f32;
-        for (o, e) in self.blocks[..out].iter_mut().zip(&exponent) {
-            for j in 0..LANES {
-                o.weight[j] *= lanes::exp(e[j] - max);
-            }
-            total += o.weight.iter().sum::<f32>();
-        }
-        if out == 0 || !(total.is_finite() && total > 0.0 && max.is_finite()) {
-            self.set_factor(axis, factor);
-            return false;
-        }
-        let inv = 1.0 / total;
-        for o in &mut self.blocks[..out] {
-            for j in 0..LANES {
-                o.weight[j] *= inv;
-                o.weighted_norm[j] = o.weight[j] * o.norm[j];
-            }
-        }
-        self.len = out * LANES;
-        true
+        (out, max, lane_total.iter().sum())
     }
 
     /// The sum over this set's lobes and the lobes of `factor` about `axis` (kappa, weight) of
@@ -291,18 +308,17 @@ impl<const B: usize> LobeSet<B> {
         factor: impl Fn(Vec3, f32) -> f32,
     ) -> bool {
         let blocks = base.blocks_used().min(B);
-        let mut total = 0.0f32;
+        let mut lane_total = [0.0f32; LANES];
         for (o, b) in self.blocks.iter_mut().zip(&base.blocks[..blocks]) {
             *o = *b;
-            let mut sum = [0.0f32; LANES];
             for j in 0..LANES {
                 let w = b.weight[j] * factor(b.mean(j), b.kappa[j]);
                 // Also drops lanes without weight, whatever the factor makes of them.
                 o.weight[j] = if w > 0.0 && w < f32::INFINITY { w } else { 0.0 };
-                sum[j] = o.weight[j];
+                lane_total[j] += o.weight[j];
             }
-            total += sum.iter().sum::<f32>();
         }
+        let total: f32 = lane_total.iter().sum();
         if !(total > 0.0 && total.is_finite()) {
             return false;
         }

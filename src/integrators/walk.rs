@@ -214,10 +214,16 @@ fn walk<C: RadianceCache>(
                     let pp = phase.eval(dir, wi);
                     (pp, if product { alpha * cache.pdf(wi) + (1.0 - alpha) * pp } else { pp })
                 };
-                let direct = sample_light(scene, p, None, s.medium, sampler, counters, |wi| {
-                    let (pp, pdf) = phase_and_pdf(ctx.cache, wi);
-                    (Spectrum::splat(pp), pdf)
-                });
+                let direct = sample_light(
+                    scene,
+                    p,
+                    None,
+                    s.medium,
+                    sampler,
+                    counters,
+                    |wi| Spectrum::splat(phase.eval(dir, wi)),
+                    |wi| phase_and_pdf(ctx.cache, wi).1,
+                );
                 l += s.beta * direct.contribution;
                 // Earlier vertices learn it (this one learns it in its direct fluence).
                 record_contribution(ctx, s.beta * direct.contribution);
@@ -311,9 +317,16 @@ fn walk<C: RadianceCache>(
         };
         let mut direct = DirectSample::NONE;
         if smooth {
-            direct = sample_light(scene, hit.p, Some(hit.ng), s.medium, sampler, counters, |wi| {
-                (bsdf.eval(wo, frame.to_local(wi), hit.uv), mix_pdf(ctx.cache, wi))
-            });
+            direct = sample_light(
+                scene,
+                hit.p,
+                Some(hit.ng),
+                s.medium,
+                sampler,
+                counters,
+                |wi| bsdf.eval(wo, frame.to_local(wi), hit.uv),
+                |wi| mix_pdf(ctx.cache, wi),
+            );
             l += s.beta * direct.contribution;
             record_contribution(ctx, s.beta * direct.contribution);
         }
@@ -450,7 +463,10 @@ impl DirectSample {
 }
 
 /// Next-event estimation: one light chosen uniformly, a direction sampled on it, weighed
-/// against the scattering strategy `eval(wi) -> (f, pdf)` with the power heuristic.
+/// against the scattering strategy (its value `f(wi)` and density `pdf(wi)`) with the power
+/// heuristic. The density, which for a guided vertex is a mixture evaluation, is asked for
+/// only where it counts: not for delta lights, nor for a light the shadow ray found blocked.
+#[allow(clippy::too_many_arguments)]
 fn sample_light(
     scene: &Scene,
     p: Vec3A,
@@ -458,7 +474,8 @@ fn sample_light(
     medium: Option<u32>,
     sampler: &mut Sampler,
     counters: &mut Counters,
-    eval: impl Fn(Vec3A) -> (Spectrum, f32),
+    f: impl Fn(Vec3A) -> Spectrum,
+    pdf: impl Fn(Vec3A) -> f32,
 ) -> DirectSample {
     let n = scene.lights.len();
     let pick = sampler.next_1d();
@@ -468,7 +485,7 @@ fn sample_light(
     }
     let light = &scene.lights[((pick * n as f32) as usize).min(n - 1)];
     let Some(ls) = light.sample(&scene.shapes, p, u) else { return DirectSample::NONE };
-    let (f, pdf_dir) = eval(ls.wi);
+    let f = f(ls.wi);
     if f.max_element() <= 0.0 {
         return DirectSample::NONE;
     }
@@ -489,7 +506,7 @@ fn sample_light(
         return DirectSample::NONE;
     }
     let light_pdf = ls.pdf / n as f32;
-    let w = if ls.delta { 1.0 } else { power_heuristic(light_pdf, pdf_dir) };
+    let w = if ls.delta { 1.0 } else { power_heuristic(light_pdf, pdf(ls.wi)) };
     let arriving = tr * ls.radiance * w;
     DirectSample {
         contribution: f * arriving / light_pdf,
