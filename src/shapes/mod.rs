@@ -1,15 +1,17 @@
-//! Geometry: analytic spheres and disks and triangle meshes (which also carry rectangles and
-//! cubes), their ray intersection, surface parameterisation and area sampling for emitters.
+//! Geometry: analytic spheres, disks and boxes (cubes under an affine map) and triangle meshes
+//! (which also carry rectangles), their ray intersection, surface parameterisation and area sampling for emitters.
 //!
 //! Everything is stored in world space once the scene is built, so a ray never needs to be
 //! transformed during traversal; the acceleration structure (`accel`) refers to primitives by
 //! (shape, index) and asks this module to intersect them.
 
+mod cuboid;
 mod disk;
 mod mesh;
 mod ply;
 mod sphere;
 
+pub use cuboid::Cuboid;
 pub use disk::Disk;
 pub use mesh::{Mesh, MeshError};
 pub use ply::PlyError;
@@ -62,6 +64,8 @@ pub enum Geometry {
     Sphere(Sphere),
     /// An analytic disk (an ellipse under non-uniform scaling).
     Disk(Disk),
+    /// An analytic box (a cube under an affine map).
+    Cuboid(Cuboid),
     /// A triangle mesh.
     Mesh(Mesh),
 }
@@ -80,6 +84,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.bounds(),
             Geometry::Disk(d) => d.bounds(),
+            Geometry::Cuboid(c) => c.bounds(),
             Geometry::Mesh(m) => m.triangle_bounds(i),
         }
     }
@@ -90,6 +95,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.intersect(ray, t_max),
             Geometry::Disk(d) => d.intersect(ray, t_max),
+            Geometry::Cuboid(c) => c.intersect(ray, t_max),
             Geometry::Mesh(m) => m.intersect_triangle(i, ray, t_max),
         }
     }
@@ -99,6 +105,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.surface(ray, hit),
             Geometry::Disk(d) => d.surface(ray, hit),
+            Geometry::Cuboid(c) => c.surface(ray, hit),
             Geometry::Mesh(m) => m.surface(i, ray, hit),
         }
     }
@@ -108,6 +115,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.area(),
             Geometry::Disk(d) => d.area(),
+            Geometry::Cuboid(c) => c.area(),
             Geometry::Mesh(m) => m.area(),
         }
     }
@@ -118,6 +126,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.sample(reference, u),
             Geometry::Disk(d) => area_to_solid_angle(reference, d.sample_area(u), d.area()),
+            Geometry::Cuboid(c) => area_to_solid_angle(reference, c.sample_area(u), c.area()),
             Geometry::Mesh(m) => area_to_solid_angle(reference, m.sample_area(u), m.area()),
         }
     }
