@@ -26,16 +26,16 @@ use std::time::Instant;
 /// Nanoseconds of one thread per counted operation: a non-negative least-squares fit (relative
 /// error) to the render times of the ten example and bench scenes, each unguided, fully guided
 /// and with each component alone (50 renders, 1 thread, 8 spp after 4 training passes;
-/// `tools/fit-cost-model.py`). The fit's rms error is 10% (worst 29%); it predicts each
+/// `tools/fit-cost-model.py`). The fit's rms error is 12% (worst 34%); it predicts each
 /// scene's cost of a fully guided sample relative to an unguided one within 30%.
-const NS_PER_PATH: f64 = 73.0;
-const NS_PER_SEGMENT: f64 = 123.0;
-const NS_PER_SCATTER: f64 = 102.0;
-const NS_PER_DENSITY_LOOKUP: f64 = 133.0;
-const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 73.0;
-const NS_PER_FIELD_LOOKUP: f64 = 150.0;
-const NS_PER_PRODUCT: f64 = 1046.0;
-const NS_PER_REWEIGHTED_PRODUCT: f64 = 426.0;
+const NS_PER_PATH: f64 = 142.0;
+const NS_PER_SEGMENT: f64 = 85.0;
+const NS_PER_SCATTER: f64 = 121.0;
+const NS_PER_DENSITY_LOOKUP: f64 = 114.0;
+const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 74.0;
+const NS_PER_FIELD_LOOKUP: f64 = 151.0;
+const NS_PER_PRODUCT: f64 = 344.0;
+const NS_PER_REWEIGHTED_PRODUCT: f64 = 315.0;
 
 /// What the pilot of adaptive guiding decided.
 #[derive(Clone, Debug, Serialize)]
