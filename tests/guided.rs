@@ -62,8 +62,8 @@ impl RadianceCache for Analytic {
     fn product_cosine(&mut self, _: Vec3A) -> bool {
         false
     }
-    fn sample(&self, _: Vec2) -> (Vec3A, f32) {
-        (Vec3A::Z, 0.0)
+    fn sample(&self, _: Vec2) -> Vec3A {
+        Vec3A::Z
     }
     fn pdf(&self, _: Vec3A) -> f32 {
         0.0
@@ -169,8 +169,8 @@ impl RadianceCache for Fixed {
     fn product_cosine(&mut self, _: Vec3A) -> bool {
         false
     }
-    fn sample(&self, _: Vec2) -> (Vec3A, f32) {
-        (Vec3A::Z, 0.0)
+    fn sample(&self, _: Vec2) -> Vec3A {
+        Vec3A::Z
     }
     fn pdf(&self, _: Vec3A) -> f32 {
         0.0
@@ -752,11 +752,11 @@ impl RadianceCache for Cone {
     fn product_cosine(&mut self, _: Vec3A) -> bool {
         true
     }
-    fn sample(&self, u: Vec2) -> (Vec3A, f32) {
+    fn sample(&self, u: Vec2) -> Vec3A {
         let z = 1.0 - u.x * (1.0 - self.cos_max);
         let r = (1.0 - z * z).max(0.0).sqrt();
         let phi = 2.0 * std::f32::consts::PI * u.y;
-        (Vec3A::new(r * phi.cos(), r * phi.sin(), z), self.density())
+        Vec3A::new(r * phi.cos(), r * phi.sin(), z)
     }
     fn pdf(&self, w: Vec3A) -> f32 {
         if w.z >= self.cos_max { self.density() } else { 0.0 }

@@ -93,8 +93,10 @@ pub trait RadianceCache {
     fn product_hg(&mut self, ray_dir: Vec3A, g: f32) -> bool;
     /// Prepares the product of incident radiance with the clamped cosine about `normal`.
     fn product_cosine(&mut self, normal: Vec3A) -> bool;
-    /// Samples the prepared product; returns the direction and its density.
-    fn sample(&self, u: Vec2) -> (Vec3A, f32);
+    /// Samples a direction from the prepared product (whose density is [`pdf`](Self::pdf):
+    /// the walk needs the mixture with standard sampling's density anyway, so a sample does
+    /// not pay for a second evaluation).
+    fn sample(&self, u: Vec2) -> Vec3A;
     /// Density of the prepared product at `w`.
     fn pdf(&self, w: Vec3A) -> f32;
     /// During training: the next-event estimate of the fluence at a recorded vertex `x`
@@ -306,9 +308,8 @@ impl RadianceCache for FieldCache<'_> {
         true
     }
     #[inline]
-    fn sample(&self, u: Vec2) -> (Vec3A, f32) {
-        let (d, pdf) = self.dist.sample_with_pdf(u);
-        (d.into(), pdf)
+    fn sample(&self, u: Vec2) -> Vec3A {
+        self.dist.sample(u).into()
     }
     #[inline]
     fn pdf(&self, w: Vec3A) -> f32 {
@@ -368,8 +369,8 @@ impl RadianceCache for NoCache {
     fn product_cosine(&mut self, _: Vec3A) -> bool {
         false
     }
-    fn sample(&self, _: Vec2) -> (Vec3A, f32) {
-        (Vec3A::Z, 0.0)
+    fn sample(&self, _: Vec2) -> Vec3A {
+        Vec3A::Z
     }
     fn pdf(&self, _: Vec3A) -> f32 {
         0.0

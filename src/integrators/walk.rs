@@ -230,7 +230,7 @@ fn walk<C: RadianceCache>(
                 // (direction, its density, phase value / density)
                 let (wi, pdf, weight) = if product {
                     let wi = if sampler.next_1d() < alpha {
-                        ctx.cache.sample(sampler.next_2d()).0
+                        ctx.cache.sample(sampler.next_2d())
                     } else {
                         phase.sample(dir, sampler.next_2d()).0
                     };
@@ -332,7 +332,7 @@ fn walk<C: RadianceCache>(
         }
         let u1 = sampler.next_1d();
         let (wi, weight, pdf, delta, eta) = if product && u1 < alpha {
-            let (wi, _) = ctx.cache.sample(sampler.next_2d());
+            let wi = ctx.cache.sample(sampler.next_2d());
             let pdf = mix_pdf(ctx.cache, wi);
             let f = bsdf.eval(wo, frame.to_local(wi), hit.uv);
             s.guided_gain *= gain_at(wi, pdf);
