@@ -315,7 +315,7 @@ fn early_pilot(
     }
     let guidance = training.guidance();
     let last_pass = 1 << (EARLY_PILOT_PASSES - 1);
-    let selection = select::pilot(scene, options, &guidance, last_pass, progress)?.selection;
+    let selection = select::pilot(scene, options, &guidance, last_pass, 2, progress)?.selection;
     if selection.gain >= EARLY_MIN_GAIN {
         training.seconds += selection.seconds;
         return None;
@@ -583,7 +583,9 @@ fn guided_phase(
         );
     }
     let last_pass = report.as_ref().map_or(16, |r| 1u32 << r.passes.saturating_sub(1));
-    let Some(choice) = select::pilot(scene, options, &guidance, last_pass, progress) else {
+    let Some(choice) =
+        select::pilot(scene, options, &guidance, last_pass, select::MIN_TILE_PILOT_SPP, progress)
+    else {
         // Cancelled during the pilot: nothing rendered.
         let mut options = options.clone();
         options.budget = Budget::Samples(0);

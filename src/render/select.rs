@@ -103,23 +103,28 @@ pub(super) struct Choice {
     pub selection: Selection,
 }
 
+/// The fewest samples per pixel of the pilot that chooses the tiles to render guided: a
+/// 2-sample variance is so noisy that the choice follows it (on the occluded light, trained
+/// for 5 s, a 2 spp pilot left 50 of 180 tiles unguided and doubled the error).
+pub(super) const MIN_TILE_PILOT_SPP: u32 = 4;
+
 /// Runs the pilot with `guidance`'s field; returns which tiles to guide and how, or `None`
 /// when the render was cancelled. `last_pass` is the spp of the last training pass, which
-/// sizes it.
+/// sizes it: a quarter of it, from `min_spp` (2, the fewest that give a variance, for the
+/// early look that only decides whether training goes on; [`MIN_TILE_PILOT_SPP`] for the
+/// choice of tiles) to 16.
 pub(super) fn pilot(
     scene: &Scene,
     options: &RenderOptions,
     guidance: &Guidance<'_>,
     last_pass: u32,
+    min_spp: u32,
     monitor: &Monitor<'_>,
 ) -> Option<Choice> {
     let start = Instant::now();
     let [w, h] = scene.camera.resolution();
-    // A quarter of the last training pass, at least 4 (a 2-sample variance is so noisy that
-    // the choice follows it: on the occluded light, trained for 5 s, a 2 spp pilot left 50 of
-    // 180 tiles unguided and doubled the error), but never more than a quarter of a sample
-    // budget (nor fewer than 2, the fewest that give a variance).
-    let mut count = (last_pass / 4).clamp(4, 16);
+    // Never more than a quarter of a sample budget (nor fewer than 2).
+    let mut count = (last_pass / 4).clamp(min_spp.max(2), 16);
     if let Budget::Samples(spp) = options.budget {
         count = count.min((spp / 4).max(2));
     }
