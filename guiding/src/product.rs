@@ -6,9 +6,12 @@
 //! `I = N(k1) N(k2) / N(k) exp(k - k1 - k2)`, where `N` is the normalisation. `I` is also the
 //! convolution of the two lobes evaluated at the angle between their means, which is how the
 //! in-scattered radiance is computed. Its exponent is never positive and is evaluated as
-//! `-k1 k2 |m1 - m2|^2 / (k + k1 + k2)`, free of cancellation; everything is kept in logarithms
-//! until the weights of a whole product mixture are normalised, so opposing sharp lobes whose
-//! product integral underflows every float still give a usable, normalised mixture.
+//! `-k1 k2 |m1 - m2|^2 / (k + k1 + k2)`, free of cancellation. A product mixture whose
+//! exponents all lie far below zero is formed relative to the largest, so opposing sharp lobes
+//! whose product integral underflows every float still give a usable, normalised mixture.
+//!
+//! Lobe sets are blocks of eight lobes in structure-of-arrays form, evaluated a block at a
+//! time with the branch-free functions of `lanes`, which the compiler vectorises.
 
 // Lane loops index several arrays in step, the form the vectoriser turns into vector code.
 #![allow(clippy::needless_range_loop)]
