@@ -10,7 +10,7 @@ use zerovar::guided::TrainedField;
 use zerovar::guided::distance::{GuidedDistance, GuidedEvent};
 use zerovar::guided::{Components, NoCache, RadianceCache};
 use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
-use zerovar::math::Ray;
+use zerovar::math::{Ray, Spectrum};
 use zerovar::media::Medium;
 use zerovar::render::{
     Budget, GuidingOptions, RenderOptions, RenderResult, TrainBudget, render, render_with_field,
@@ -20,6 +20,21 @@ use zerovar::scene::Scene;
 use zerovar::stats::Counters;
 use zerovar_guiding::PathRecorder;
 use zerovar_testkit::{MeanEstimate, chi2_1d, integrate_1d};
+
+/// Sample `i` of stream `stream` through a uniformly random point of the image of `s`.
+fn camera_sample<C: RadianceCache>(
+    settings: &WalkSettings,
+    s: &Scene,
+    ctx: &mut WalkContext<'_, C>,
+    stream: u64,
+    i: u64,
+    counters: &mut Counters,
+) -> Spectrum {
+    let mut sampler = Sampler::new(stream, 0, i);
+    let [w, h] = s.camera().resolution();
+    let ray = s.camera().ray(sampler.next_2d() * Vec2::new(w as f32, h as f32));
+    walk::radiance(settings, s, ray, s.camera_medium(), ctx, &mut sampler, counters)
+}
 
 /// A cache with fixed estimates: `incident` and `inscattered` times a bright blob around
 /// `centre` (so guided probabilities vary along a ray), all scaled by `scale`.
@@ -285,18 +300,8 @@ fn analytic_cache_gives_zero_variance() {
         let mut cache = Analytic::constant(3.0);
         let mut spread = MeanEstimate::default();
         for i in 0..2000 {
-            let mut sampler = Sampler::new(1, 0, i);
-            let ray = s.camera().ray(sampler.next_2d() * 4.0);
             let mut ctx = WalkContext { cache: &mut cache, pixel: Some(3.0), recorder: None };
-            let l = walk::radiance(
-                &settings,
-                &s,
-                ray,
-                s.camera_medium(),
-                &mut ctx,
-                &mut sampler,
-                &mut Counters::default(),
-            );
+            let l = camera_sample(&settings, &s, &mut ctx, 1, i, &mut Counters::default());
             for c in l.to_array() {
                 assert!((c - 3.0).abs() < 1e-4, "albedo {albedo}: sample {i} returned {l}");
             }
@@ -307,18 +312,8 @@ fn analytic_cache_gives_zero_variance() {
         let unguided = WalkSettings { guide: Components::OFF, ..settings };
         let mut other = MeanEstimate::default();
         for i in 0..2000 {
-            let mut sampler = Sampler::new(1, 0, i);
-            let ray = s.camera().ray(sampler.next_2d() * 4.0);
             let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None };
-            let l = walk::radiance(
-                &unguided,
-                &s,
-                ray,
-                s.camera_medium(),
-                &mut ctx,
-                &mut sampler,
-                &mut Counters::default(),
-            );
+            let l = camera_sample(&unguided, &s, &mut ctx, 1, i, &mut Counters::default());
             other.push(l.x as f64);
         }
         assert!(other.std_error() > 1e-3, "albedo {albedo}: unguided spread {:?}", other);
@@ -360,19 +355,9 @@ radiance = 1
         let mut est = MeanEstimate::default();
         let n = 20_000;
         for i in 0..n {
-            let mut sampler = Sampler::new(2, 0, i);
-            let ray = s.camera().ray(sampler.next_2d() * 8.0);
             let walks_before = counters.walks;
             let mut ctx = WalkContext { cache: &mut cache, pixel: Some(1.0), recorder: None };
-            let l = walk::radiance(
-                &settings,
-                &s,
-                ray,
-                s.camera_medium(),
-                &mut ctx,
-                &mut sampler,
-                &mut counters,
-            );
+            let l = camera_sample(&settings, &s, &mut ctx, 2, i, &mut counters);
             assert!(l.is_finite(), "cache x{scale}: sample {i} is {l}");
             let made = counters.walks - walks_before;
             assert!(
@@ -690,19 +675,9 @@ fn training_continuations_learn_the_light_found_by_later_next_event_estimates() 
     let mut recorder = PathRecorder::new();
     let mut samples = Vec::new();
     for i in 0..4000 {
-        let mut sampler = Sampler::new(3, 0, i);
-        let ray = s.camera().ray(sampler.next_2d() * Vec2::new(12.0, 10.0));
         let mut ctx =
             WalkContext { cache: &mut NoCache, pixel: None, recorder: Some(&mut recorder) };
-        let l = walk::radiance(
-            &settings,
-            &s,
-            ray,
-            s.camera_medium(),
-            &mut ctx,
-            &mut sampler,
-            &mut Counters::default(),
-        );
+        let l = camera_sample(&settings, &s, &mut ctx, 3, i, &mut Counters::default());
         assert!(l.is_finite());
         recorder.finish(&mut samples);
     }
@@ -777,18 +752,8 @@ fn guided_directions_without_windows_stop_compounding_their_weights() {
     let mut estimate = MeanEstimate::default();
     let mut largest = 0.0f32;
     for i in 0..40_000 {
-        let mut sampler = Sampler::new(5, 0, i);
-        let ray = s.camera().ray(sampler.next_2d() * 4.0);
         let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None };
-        let l = walk::radiance(
-            &settings,
-            &s,
-            ray,
-            s.camera_medium(),
-            &mut ctx,
-            &mut sampler,
-            &mut Counters::default(),
-        );
+        let l = camera_sample(&settings, &s, &mut ctx, 5, i, &mut Counters::default());
         largest = largest.max(l.max_element());
         estimate.push(f64::from(l.x));
     }

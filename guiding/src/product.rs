@@ -61,8 +61,8 @@ struct Block {
     z: [f32; LANES],
     kappa: [f32; LANES],
     weight: [f32; LANES],
-    norm: [f32; LANES],
-    /// `weight * norm`, the factor in front of the exponential in the density.
+    /// The weight times the lobe's normalisation, the factor in front of the exponential in
+    /// the density (the normalisation alone is never needed).
     weighted_norm: [f32; LANES],
 }
 
@@ -73,7 +73,6 @@ impl Block {
         z: [1.0; LANES],
         kappa: [0.0; LANES],
         weight: [0.0; LANES],
-        norm: [0.0; LANES],
         weighted_norm: [0.0; LANES],
     };
 
@@ -82,7 +81,6 @@ impl Block {
         (self.x[j], self.y[j], self.z[j]) = (mean.x, mean.y, mean.z);
         self.kappa[j] = kappa;
         self.weight[j] = weight;
-        self.norm[j] = norm;
         self.weighted_norm[j] = weight * norm;
     }
 
@@ -96,7 +94,7 @@ impl Block {
 /// concentration `kb`: the product lobes' unnormalised means `kappa' m'`, their
 /// concentrations, the exponents of the product integrals (`-inf` for lanes without weight)
 /// and the reciprocals of the product lobes' normalisations.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, Default)]
 struct BlockProduct {
     sx: [f32; LANES],
     sy: [f32; LANES],
@@ -111,14 +109,7 @@ impl BlockProduct {
     /// free of cancellation; `1 / N(k') = 4 pi (1 - e^{-2k'}) / (2k')`.
     #[inline(always)]
     fn new(b: &Block, axis: Vec3, kb: f32) -> Self {
-        let mut p = BlockProduct {
-            sx: [0.0; LANES],
-            sy: [0.0; LANES],
-            sz: [0.0; LANES],
-            kappa: [0.0; LANES],
-            exponent: [0.0; LANES],
-            inv_norm: [0.0; LANES],
-        };
+        let mut p = BlockProduct::default();
         for j in 0..LANES {
             let ka = b.kappa[j];
             let sx = b.x[j] * ka + axis.x * kb;
@@ -269,7 +260,6 @@ impl<const B: usize> LobeSet<B> {
                     o.y[j] = p.sy[j] * inv_k + axis.y * uniform;
                     o.z[j] = p.sz[j] * inv_k + axis.z * uniform;
                     o.kappa[j] = k;
-                    o.norm[j] = 1.0 / p.inv_norm[j];
                     // weight * norm: the product lobe's normalisation cancels.
                     let wn = b.weighted_norm[j] * factor_lin * lanes::exp(p.exponent[j] - shift);
                     o.weighted_norm[j] = wn;
@@ -315,9 +305,12 @@ impl<const B: usize> LobeSet<B> {
         for (o, b) in self.blocks.iter_mut().zip(&base.blocks[..blocks]) {
             *o = *b;
             for j in 0..LANES {
-                let w = b.weight[j] * factor(b.mean(j), b.kappa[j]);
+                let f = factor(b.mean(j), b.kappa[j]);
+                let w = b.weight[j] * f;
                 // Also drops lanes without weight, whatever the factor makes of them.
-                o.weight[j] = if w > 0.0 && w < f32::INFINITY { w } else { 0.0 };
+                let keep = w > 0.0 && w < f32::INFINITY;
+                o.weight[j] = if keep { w } else { 0.0 };
+                o.weighted_norm[j] = if keep { b.weighted_norm[j] * f } else { 0.0 };
                 lane_total[j] += o.weight[j];
             }
         }
@@ -329,7 +322,7 @@ impl<const B: usize> LobeSet<B> {
         for o in &mut self.blocks[..blocks] {
             for j in 0..LANES {
                 o.weight[j] *= inv;
-                o.weighted_norm[j] = o.weight[j] * o.norm[j];
+                o.weighted_norm[j] *= inv;
             }
         }
         self.len = base.len.min(Self::CAPACITY);
