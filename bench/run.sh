@@ -1,17 +1,18 @@
 #!/usr/bin/env bash
 # The benchmark suite: guided against unguided at equal time on every scene of scenes/bench/,
 # and Mitsuba 3's volpath on the same scene (scenes/bench/<scene>.xml) at the same time.
-# Usage: bench/run.sh [SECONDS_PER_METHOD] [REFERENCE_SECONDS]   (defaults 20 and 120)
+# Usage: bench/run.sh [SECONDS_PER_METHOD] [REFERENCE_SECONDS]   (defaults 20 and 600)
 # Writes bench/out/<scene>/ (tables, images), bench/RESULTS.md (a summary, every table, the
 # machine, the date) and bench/plots/ (each scene's convergence plot, image strip and crops, which
 # RESULTS.md shows). References are kept between runs while the scene file is unchanged (its
-# SHA-256 is kept beside the reference); delete bench/out to redo them all.
+# SHA-256 is kept beside the reference); delete bench/out to redo them all. The reference's
+# own noise is reported and taken out of the ratios (see `zerovar compare` in README).
 # The Mitsuba 3 column needs `import mitsuba` to work (pip install mitsuba); without it the
 # column is left out and RESULTS.md says why. tools/mitsuba-bench.py picks the variant.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 budget=${1:-20}
-ref_time=${2:-120}
+ref_time=${2:-600}
 cargo build --release --quiet --bin zerovar
 bin=target/release/zerovar
 results=bench/RESULTS.md
@@ -19,7 +20,7 @@ results=bench/RESULTS.md
   echo "# Benchmark results"
   echo
   echo "Equal time: ${budget} s per method (a guided method's training included), relMSE against"
-  echo "an unguided reference of ${ref_time} s; \`bench/run.sh ${budget} ${ref_time}\`."
+  echo "an unguided reference (${ref_time} s for a new one; each scene's section gives its spp and seconds), its own noise taken out; \`bench/run.sh ${budget} ${ref_time}\`."
   echo
   echo "- date: $(date -u +%Y-%m-%d)"
   echo "- machine: $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | xargs)"
@@ -43,7 +44,7 @@ for scene in scenes/bench/*.toml; do
   if [ ! -f "$out/reference.exr" ] || [ "$(cat "$out/reference.sha256" 2>/dev/null)" != "$sum" ]; then
     echo "$name: reference (${ref_time} s)" >&2
     rm -f "$out/reference.sha256"
-    $bin reference "$scene" -o "$out/reference.exr" --time "$ref_time" --quiet
+    $bin reference "$scene" -o "$out/reference.exr" --time "$ref_time" --quiet 2> "$out/reference.txt"
     echo "$sum" > "$out/reference.sha256"
   fi
   echo "$name: compare (${budget} s per method)" >&2
@@ -66,6 +67,9 @@ for scene in scenes/bench/*.toml; do
   fi
   {
     echo; echo "## $name"; echo
+    if [ -f "$out/reference.txt" ]; then
+      echo "Unguided $(sed 's|-> .*||' "$out/reference.txt")(\`zerovar reference\`, its own seed)."; echo
+    fi
     if [ "$mitsuba" = 1 ]; then
       python3 bench/tables.py scene "$out" "$xml"
     else

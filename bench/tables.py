@@ -32,37 +32,60 @@ def why_missing(out):
     return lines[-1] if lines else "tools/mitsuba-bench.py left no log"
 
 
+def excess_basis(errors):
+    """Whether every error (a metrics dict) has the reference's noise share and an excess that
+    stands out of its standard error, as `zerovar compare` decides its `error_basis`."""
+    def resolved(e):
+        n = e.get("reference_noise")
+        return n is not None and n["excess"]["all"] > 2.0 * n["excess_std_error"]
+    return all(resolved(e) for e in errors)
+
+
+def scored(e, excess):
+    """The relMSE a ratio uses: less the reference's noise when `excess`."""
+    return e["reference_noise"]["excess"]["all"] if excess else e["rel_mse"]["all"]
+
+
 def summary(results, out, scenes, mitsuba):
     rows = []
     for scene in sorted(scenes.glob("*.toml")):
         methods = json.loads((out / scene.stem / "results.json").read_text())
-        base = methods[0]["checkpoints"][-1]["error"]["rel_mse"]["all"]
+        m3 = load_mitsuba(out / scene.stem) if mitsuba else None
+        errors = [m["checkpoints"][-1]["error"] for m in methods] + ([m3["error"]] if m3 else [])
+        excess = excess_basis(errors)
+        first = errors[0]
+        noise = first["reference_noise"]["share"]["all"] if first.get("reference_noise") else None
+        base = scored(first, excess)
         extra = ""
         if mitsuba:
-            m3 = load_mitsuba(out / scene.stem)
             if m3 is None:
                 extra = " failed | - |"
             else:
-                e3 = m3["error"]["rel_mse"]["all"]
+                e3 = scored(m3["error"], excess)
                 extra = f" {e3:.3e} | {e3 / base:.2f} |"
+        lead = f"| {scene.stem} | {'-' if noise is None else f'{noise:.2e}'} | {'yes' if excess else 'no'} "
         for m in methods[1:]:
-            e = m["checkpoints"][-1]["error"]["rel_mse"]["all"]
-            rows.append(f"| {scene.stem} | {base:.3e} | {m['name']} | {e:.3e} | {base / e:.2f} "
+            e = scored(m["checkpoints"][-1]["error"], excess)
+            rows.append(f"{lead}| {base:.3e} | {m['name']} | {e:.3e} | {base / e:.2f} "
                         f"| {m['speedup']:.2f} |{extra}")
     head = ["", "## Summary", "",
             "Equal-time relMSE of each method against the first (unguided); error ratio > 1 means",
-            "the method wins. Speed-up is the efficiency ratio 1 / (relMSE x seconds)."]
+            "the method wins. Speed-up is the efficiency ratio 1 / (relMSE x seconds).",
+            "The reference is a finite render too: its own noise (reference noise, from its",
+            "standard-error layer) adds to every relMSE and pulls every ratio towards 1. Where",
+            "`less noise` says yes, each relMSE here is the excess over that noise (every method's",
+            "excess more than twice its standard error over pixels); the scene tables give both."]
     if mitsuba:
         head += ["Mitsuba 3 is `volpath` on the scene's XML twin at the same wall-clock time (scene",
                  "load and JIT included) and thread count; Mitsuba / unguided is its relMSE over",
                  "zerovar's unguided relMSE (> 1: unguided zerovar has the smaller error). See each",
                  "scene's table for the variant, spp and how well the two renderers agree.", "",
-                 "| scene | unguided relMSE | method | its relMSE | error ratio | speed-up "
-                 "| Mitsuba 3 relMSE | Mitsuba / unguided |",
-                 "|---|---|---|---|---|---|---|---|"]
+                 "| scene | reference noise | less noise | unguided relMSE | method | its relMSE "
+                 "| error ratio | speed-up | Mitsuba 3 relMSE | Mitsuba / unguided |",
+                 "|---|---|---|---|---|---|---|---|---|---|"]
     else:
-        head += ["", "| scene | unguided relMSE | method | its relMSE | error ratio | speed-up |",
-                 "|---|---|---|---|---|---|"]
+        head += ["", "| scene | reference noise | less noise | unguided relMSE | method | its relMSE "
+                 "| error ratio | speed-up |", "|---|---|---|---|---|---|---|---|"]
     with open(results, "a") as f:
         f.write("\n".join(head + rows) + "\n")
 
@@ -71,18 +94,25 @@ def scene_table(out, xml):
     methods = json.loads((out / "results.json").read_text())
     m3 = load_mitsuba(out)
     base_eff = methods[0]["efficiency"]
-    cols = "| method | seconds | spp | relMSE | MSE | MAPE | SMAPE | efficiency | speed-up |"
+    errors = [m["checkpoints"][-1]["error"] for m in methods] + ([m3["error"]] if m3 else [])
+    excess = excess_basis(errors)
+    noisy = all(e.get("reference_noise") for e in errors)
+    cols = "| method | seconds | spp | relMSE |" + (" relMSE - reference noise |" if noisy else "")
+    cols += " MSE | MAPE | SMAPE | efficiency | speed-up |"
     lines = []
-    e3 = m3["error"]["rel_mse"]["all"] if m3 else None
+    e3 = scored(m3["error"], excess) if m3 else None
     lines.append(cols + (" Mitsuba / this |" if m3 else ""))
-    lines.append("|---" * (9 + (1 if m3 else 0)) + "|")
+    lines.append("|---" * (9 + noisy + (1 if m3 else 0)) + "|")
 
     def row(name, seconds, spp, e, efficiency, speedup):
-        r = (f"| {name} | {seconds:.2f} | {spp} | {rust_e(e['rel_mse']['all'])} | "
-             f"{rust_e(e['mse']['all'])} | {e['mape']['all']:.4f} | {e['smape']['all']:.4f} | "
-             f"{rust_e(efficiency)} | {speedup:.2f} |")
+        r = f"| {name} | {seconds:.2f} | {spp} | {rust_e(e['rel_mse']['all'])} | "
+        if noisy:
+            n = e["reference_noise"]
+            r += f"{rust_e(n['excess']['all'])} ± {n['excess_std_error']:.1e} | "
+        r += (f"{rust_e(e['mse']['all'])} | {e['mape']['all']:.4f} | {e['smape']['all']:.4f} | "
+              f"{rust_e(efficiency)} | {speedup:.2f} |")
         if m3:
-            r += f" {e3 / e['rel_mse']['all']:.2f} |"
+            r += f" {e3 / scored(e, excess):.2f} |"
         return r
 
     for m in methods:
@@ -93,6 +123,12 @@ def scene_table(out, xml):
         lines.append(row(f"Mitsuba 3 ({m3['variant']})", m3["seconds"], m3["spp"], m3["error"], eff,
                          eff / base_eff))
     print("\n".join(lines))
+    if noisy:
+        share = errors[0]["reference_noise"]["share"]["all"]
+        print()
+        print(f"The reference's own noise adds {rust_e(share)} to every relMSE; efficiency, speed-up"
+              + (" and Mitsuba / this use the relMSE less it." if excess else
+                 " and Mitsuba / this use the raw relMSE (some excess is not resolved)."))
     if m3:
         print()
         note = (f"Mitsuba 3 {m3['mitsuba']} `{m3['variant']}` on `{xml}`, {m3['threads']} threads: "

@@ -4,9 +4,13 @@
 //!
 //! Checkpoints are separate renders at 1/8, 1/4, 1/2 and all of the budget with the same
 //! seed, so each point of a convergence curve is an honest equal-budget run.
+//!
+//! When the reference carries its standard error, efficiencies are computed from the excess
+//! relMSE (the reference's own noise taken out, see [`crate::metrics`]) provided every method's
+//! excess stands out of its noise; otherwise from the raw relMSE, and the table says which.
 
 use crate::guided::Components;
-use crate::metrics::{ImageError, MetricsError, compare as measure};
+use crate::metrics::{ImageError, MetricsError, compare_with_reference_noise};
 use crate::render::{Budget, RenderError, RenderOptions, TrainBudget, parse_guiding, render};
 use crate::scene::Scene;
 use crate::tracking::TrackerChoice;
@@ -163,7 +167,11 @@ pub struct MethodResult {
     pub name: String,
     /// Convergence, the last point at the full budget.
     pub checkpoints: Vec<Checkpoint>,
-    /// Efficiency 1 / (relMSE x seconds) at the full budget.
+    /// The error the efficiency is computed from, at the full budget (see `error_basis`).
+    pub error: f64,
+    /// Which relMSE `error` is.
+    pub error_basis: ErrorBasis,
+    /// Efficiency 1 / (error x seconds) at the full budget.
     pub efficiency: f64,
     /// Efficiency relative to the first method's.
     pub speedup: f64,
@@ -172,16 +180,31 @@ pub struct MethodResult {
     pub image: Vec<[f32; 3]>,
 }
 
-/// Runs every method with `budget` on `scene` and measures it against `reference`.
+/// Which relMSE a comparison's efficiencies are computed from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ErrorBasis {
+    /// relMSE against the reference as it is.
+    RelMse,
+    /// relMSE less the reference's own noise (every method's excess was resolved).
+    Excess,
+}
+
+/// Runs every method with `budget` on `scene` and measures it against `reference`, whose
+/// per-pixel standard error `reference_error` (if known) is taken out of the relMSE.
 /// `progress(method index, fraction index)` reports as each checkpoint starts.
 pub fn run(
     scene: &mut Scene,
     reference: &[[f32; 3]],
+    reference_error: Option<&[[f32; 3]]>,
     methods: &[Method],
     budget: Budget,
     trim: f64,
     progress: &dyn Fn(usize, usize),
 ) -> Result<Vec<MethodResult>, CompareError> {
+    let measure = |image: &[[f32; 3]], reference: &[[f32; 3]], trim: f64| {
+        compare_with_reference_noise(image, reference, reference_error, trim)
+    };
     // Size and trim are checked before any rendering.
     measure(reference, reference, trim)?;
     let pixels = (scene.camera.resolution()[0] * scene.camera.resolution()[1]) as usize;
@@ -210,15 +233,31 @@ pub fn run(
             });
             image = r.image;
         }
-        let last = checkpoints.last().expect("four checkpoints");
-        let efficiency = 1.0 / (last.error.rel_mse.all * last.seconds).max(1e-300);
         results.push(MethodResult {
             name: m.name.clone(),
             checkpoints,
-            efficiency,
+            error: 0.0,
+            error_basis: ErrorBasis::RelMse,
+            efficiency: 0.0,
             speedup: 1.0,
             image,
         });
+    }
+    let last = |r: &MethodResult| r.checkpoints.last().expect("four checkpoints").clone();
+    let basis =
+        if results.iter().all(|r| last(r).error.reference_noise.is_some_and(|n| n.resolved())) {
+            ErrorBasis::Excess
+        } else {
+            ErrorBasis::RelMse
+        };
+    for r in &mut results {
+        let c = last(r);
+        r.error_basis = basis;
+        r.error = match (basis, c.error.reference_noise) {
+            (ErrorBasis::Excess, Some(n)) => n.excess.all,
+            _ => c.error.rel_mse.all,
+        };
+        r.efficiency = 1.0 / (r.error * c.seconds).max(1e-300);
     }
     scene
         .set_tracker(TrackerChoice::Auto)
@@ -250,26 +289,43 @@ fn scaled(budget: Budget, fraction: f64, options: &mut RenderOptions) -> Budget 
     }
 }
 
-/// The results as a markdown table.
+/// The results as a markdown table; with the reference's noise known, a column of the excess
+/// relMSE (plus or minus its standard error) and a line saying which relMSE the efficiencies use.
 pub fn markdown(results: &[MethodResult]) -> String {
-    let mut s = String::from(
-        "| method | seconds | spp | relMSE | MSE | MAPE | SMAPE | efficiency | speed-up |\n|---|---|---|---|---|---|---|---|---|\n",
-    );
+    let noise = |r: &MethodResult| r.checkpoints.last().and_then(|c| c.error.reference_noise);
+    let with_noise = results.iter().all(|r| noise(r).is_some());
+    let mut s = String::from("| method | seconds | spp | relMSE |");
+    if with_noise {
+        s += " relMSE - reference noise |";
+    }
+    s += " MSE | MAPE | SMAPE | efficiency | speed-up |\n|---|---|---|---|";
+    if with_noise {
+        s += "---|";
+    }
+    s += "---|---|---|---|---|\n";
     for r in results {
         let c = r.checkpoints.last().expect("checkpoints");
         let e = &c.error;
+        s += &format!("| {} | {:.2} | {} | {:.4e} |", r.name, c.seconds, c.spp, e.rel_mse.all);
+        if let Some(n) = noise(r).filter(|_| with_noise) {
+            s += &format!(" {:.4e} ± {:.1e} |", n.excess.all, n.excess_std_error);
+        }
         s += &format!(
-            "| {} | {:.2} | {} | {:.4e} | {:.4e} | {:.4} | {:.4} | {:.4e} | {:.2} |\n",
-            r.name,
-            c.seconds,
-            c.spp,
-            e.rel_mse.all,
-            e.mse.all,
-            e.mape.all,
-            e.smape.all,
-            r.efficiency,
-            r.speedup
+            " {:.4e} | {:.4} | {:.4} | {:.4e} | {:.2} |\n",
+            e.mse.all, e.mape.all, e.smape.all, r.efficiency, r.speedup
         );
+    }
+    if let Some(n) = results.first().and_then(noise) {
+        s += &format!(
+            "\nThe reference's own noise adds {:.4e} to every relMSE (its standard error layer). ",
+            n.share.all
+        );
+        s += match results.first().map(|r| r.error_basis) {
+            Some(ErrorBasis::Excess) => "Efficiency and speed-up use the relMSE less it.\n",
+            _ => {
+                "Some method's error is not resolved above it (excess below twice its standard error), so efficiency and speed-up use the raw relMSE: render a longer reference.\n"
+            }
+        };
     }
     s
 }
@@ -277,7 +333,7 @@ pub fn markdown(results: &[MethodResult]) -> String {
 /// Every checkpoint of every method as CSV.
 pub fn csv(results: &[MethodResult]) -> String {
     let mut s = String::from(
-        "method,fraction,seconds,spp,relmse,mse,mape,smape,relmse_r,relmse_g,relmse_b\n",
+        "method,fraction,seconds,spp,relmse,mse,mape,smape,relmse_r,relmse_g,relmse_b,reference_noise,relmse_excess,relmse_excess_se\n",
     );
     for r in results {
         for c in &r.checkpoints {
@@ -296,6 +352,15 @@ pub fn csv(results: &[MethodResult]) -> String {
                 e.rel_mse.rgb[1],
                 e.rel_mse.rgb[2]
             );
+            // Empty cells when the reference's noise is unknown.
+            s.pop();
+            s += &match e.reference_noise {
+                Some(n) => format!(
+                    ",{:.6e},{:.6e},{:.6e}\n",
+                    n.share.all, n.excess.all, n.excess_std_error
+                ),
+                None => ",,,\n".into(),
+            };
         }
     }
     s

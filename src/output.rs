@@ -39,14 +39,35 @@ pub enum OutputError {
 
 /// Reads the first RGB(A) layer of an EXR file as row-major pixels: (width, height, pixels).
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), OutputError> {
-    let image = exr::prelude::read_first_rgba_layer_from_file(
+    let (w, h, pixels, _) = read_exr_with_error(path)?;
+    Ok((w, h, pixels))
+}
+
+/// Reads an EXR file's first RGB(A) layer and, if it has one (as `zerovar reference` writes),
+/// its layer named `stderr`: (width, height, pixels, standard errors).
+#[allow(clippy::type_complexity)]
+pub fn read_exr_with_error(
+    path: &Path,
+) -> Result<(usize, usize, Vec<[f32; 3]>, Option<Vec<[f32; 3]>>), OutputError> {
+    let image = exr::prelude::read_all_rgba_layers_from_file(
         path,
         |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
-        |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.y() * *w + pos.x()] = [r, g, b],
+        |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
+            px[pos.y() * *w + pos.x()] = [r, g, b]
+        },
     )
     .map_err(|e| OutputError::Exr { path: path.display().to_string(), message: e.to_string() })?;
-    let (w, pixels) = image.layer_data.channel_data.pixels;
-    Ok((w, pixels.len() / w.max(1), pixels))
+    let mut layers = image.layer_data.into_iter();
+    let first = layers.next().ok_or_else(|| OutputError::Exr {
+        path: path.display().to_string(),
+        message: "no RGB layer".into(),
+    })?;
+    let (w, pixels) = first.channel_data.pixels;
+    let error = layers
+        .find(|l| l.attributes.layer_name.as_ref().is_some_and(|n| n.eq("stderr")))
+        .map(|l| l.channel_data.pixels.1)
+        .filter(|e| e.len() == pixels.len());
+    Ok((w, pixels.len() / w.max(1), pixels, error))
 }
 
 /// Writes the mean image and, as a second layer named `stderr`, its per-pixel standard error.

@@ -325,9 +325,37 @@ fn reference_and_compare_end_to_end() {
     );
     let speedup = b["speedup"].as_f64().unwrap();
     assert!(speedup > 0.25 && speedup < 4.0, "self speed-up {speedup}");
+    // The reference carries its standard error: its share is reported and taken out.
+    let e = &a["checkpoints"][3]["error"];
+    let share = e["reference_noise"]["share"]["all"].as_f64().unwrap();
+    let excess = e["reference_noise"]["excess"]["all"].as_f64().unwrap();
+    let rel_mse = e["rel_mse"]["all"].as_f64().unwrap();
+    assert!(share > 0.0 && (rel_mse - share - excess).abs() <= 1e-12 * rel_mse, "{e}");
+    let basis = a["error_basis"].as_str().unwrap();
+    let used = if basis == "excess" { excess } else { rel_mse };
+    assert_eq!(a["error"].as_f64().unwrap(), used, "{basis}");
     let table = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(table.lines().count(), 5, "{table}");
-    assert!(table.lines().skip(2).all(|l| l.split('|').count() == 11), "{table}");
+    assert_eq!(table.lines().count(), 7, "{table}");
+    assert!(table.lines().take(5).skip(2).all(|l| l.split('|').count() == 12), "{table}");
+    assert!(table.contains("The reference's own noise adds"), "{table}");
+    // A reference without a standard-error layer (a render's EXR) keeps the raw relMSE, and
+    // says so.
+    let plain = dir.join("g.exr");
+    let o = zerovar(&[
+        "compare",
+        s,
+        "--reference",
+        plain.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--out",
+        temp_dir().join("cmp-plain").to_str().unwrap(),
+        "--method",
+        "a",
+    ]);
+    assert!(o.status.success() && stderr(&o).contains("has no `stderr` layer"), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(!table.contains("reference noise"), "{table}");
     // Errors: a reference of another size, a missing one, an unknown option.
     let small = write("cmp-small.toml", GOOD.replace("resolution = [8, 6]", "resolution = [4, 3]"));
     let o =

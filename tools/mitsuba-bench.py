@@ -125,8 +125,34 @@ def metric(image, reference, trim, f):
     return {"rgb": rgb, "all": sum(rgb) / 3.0}
 
 
-def image_error(image, reference, trim):
-    """relMSE, MSE, MAPE and SMAPE of `image` against `reference` (N x 3 float32 arrays)."""
+def reference_noise(image, reference, reference_se, trim):
+    """The reference's own share of relMSE and the excess over it (zerovar's
+    `metrics::compare_with_reference_noise`): per channel the pixels relMSE keeps, the mean of
+    s^2 / (R^2 + eps) over them, and the standard error of the excess over pixels."""
+    import numpy as np
+
+    n = image.shape[0]
+    keep = n - min(int(np.floor(n * trim)), max(n - 1, 0))
+    rel, share, se = [], [], []
+    for c in range(3):
+        r = reference[:, c].astype(np.float64)
+        d = r * r + EPSILON
+        values = (image[:, c].astype(np.float64) - r) ** 2 / d
+        floors = reference_se[:, c].astype(np.float64) ** 2 / d
+        if keep < n:
+            kept = np.argpartition(values, keep)[:keep]
+            values, floors = values[kept], floors[kept]
+        rel.append(values.mean())
+        share.append(floors.mean())
+        se.append(float(np.sqrt((values - floors).var(ddof=1) / keep)) if keep > 1 else 0.0)
+    per = lambda v: {"rgb": [float(x) for x in v], "all": float(sum(v) / 3.0)}
+    return {"share": per(share), "excess": per([a - b for a, b in zip(rel, share)]),
+            "excess_std_error": sum(se) / 3.0}
+
+
+def image_error(image, reference, trim, reference_se=None):
+    """relMSE, MSE, MAPE and SMAPE of `image` against `reference` (N x 3 float32 arrays), and
+    with the reference's standard error the reference noise's share of relMSE."""
     import numpy as np
 
     if image.shape != reference.shape or image.size == 0:
@@ -135,6 +161,8 @@ def image_error(image, reference, trim):
             "render both at the same resolution")
     return {
         "rel_mse": metric(image, reference, trim, lambda i, r: (i - r) ** 2 / (r * r + EPSILON)),
+        "reference_noise": (None if reference_se is None
+                            else reference_noise(image, reference, reference_se, trim)),
         "mse": metric(image, reference, trim, lambda i, r: (i - r) ** 2),
         "mape": metric(image, reference, trim, lambda i, r: np.abs(i - r) / (np.abs(r) + EPSILON)),
         "smape": metric(image, reference, trim,
@@ -297,7 +325,8 @@ def worker(a):
         "spp": spp,
         "passes": passes,
         "trim": a.trim,
-        "error": image_error(image32.reshape(-1, 3), ref.reshape(-1, 3), a.trim),
+        "error": image_error(image32.reshape(-1, 3), ref.reshape(-1, 3), a.trim,
+                             None if ref_se is None else ref_se.reshape(-1, 3)),
         "image": a.out,
     }
     if ref_se is not None and passes > 1:

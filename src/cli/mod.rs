@@ -307,7 +307,7 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     if let Some(m) = methods.iter().find(|m| !names.insert(m.name.clone())) {
         bail!("--method {}: two methods have this name", m.name);
     }
-    let (rw, rh, reference) = zerovar::output::read_exr(&a.reference)?;
+    let (rw, rh, reference, reference_error) = zerovar::output::read_exr_with_error(&a.reference)?;
     let [w, h] = scene.camera().resolution();
     if (rw, rh) != (w as usize, h as usize) {
         bail!(
@@ -318,9 +318,23 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     let crop = a.crop.as_deref().map(|c| parse_crop(c, w as usize, h as usize)).transpose()?;
     std::fs::create_dir_all(&a.out)
         .with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
-    let results = run(&mut scene, &reference, &methods, budget, a.trim, &|m, c| {
-        eprintln!("{}: checkpoint {}/4", methods[m].name, c + 1);
-    })?;
+    if reference_error.is_none() {
+        eprintln!(
+            "note: {} has no `stderr` layer, so its own noise stays in every relMSE (a reference from `zerovar reference` has one)",
+            a.reference.display()
+        );
+    }
+    let results = run(
+        &mut scene,
+        &reference,
+        reference_error.as_deref(),
+        &methods,
+        budget,
+        a.trim,
+        &|m, c| {
+            eprintln!("{}: checkpoint {}/4", methods[m].name, c + 1);
+        },
+    )?;
     let table = markdown(&results);
     print!("{table}");
     let write = |name: &str, text: String| -> Result<()> {
