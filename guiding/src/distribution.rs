@@ -10,7 +10,7 @@ use crate::field::Field;
 use crate::hg::{self, HG_LOBES};
 use crate::lanes::{self, LANES};
 use crate::mixture::MAX_LOBES;
-use crate::product::{COSINE_KAPPA, LobeSet};
+use crate::product::{COSINE_KAPPA, LobeSet, RegionLanes};
 use glam::{Vec2, Vec3};
 
 /// Lobes a product can have: every mixture lobe times every lobe of the phase-function fit.
@@ -53,6 +53,8 @@ pub enum ProductKind {
 #[derive(Clone, Debug)]
 pub struct VolumeDistribution {
     base: LobeSet<{ MAX_LOBES / LANES }>,
+    /// Each base lobe's mean cosine (reweighting's convolutions need them).
+    base_mean_cosine: [[f32; LANES]; MAX_LOBES / LANES],
     product: LobeSet<{ MAX_PRODUCT_LOBES / LANES }>,
     kind: ProductKind,
     fluence: f32,
@@ -63,6 +65,7 @@ impl Default for VolumeDistribution {
     fn default() -> Self {
         Self {
             base: LobeSet::default(),
+            base_mean_cosine: [[0.0; LANES]; MAX_LOBES / LANES],
             product: LobeSet::default(),
             kind: ProductKind::None,
             fluence: 0.0,
@@ -81,18 +84,27 @@ impl VolumeDistribution {
         match field.lookup_index(pos, u) {
             Some(index) => {
                 let region = &field.regions()[index];
-                self.base.set_from(region.mixture());
+                self.load_lanes(&region.lanes);
                 self.fluence = region.fluence();
                 self.region = Some(index as u32);
                 true
             }
             None => {
                 self.base.set_uniform();
+                self.base_mean_cosine[0][0] = 0.0;
                 self.fluence = 0.0;
                 self.region = None;
                 false
             }
         }
+    }
+
+    /// Copies a region's lobes and mean cosines (only the blocks in use).
+    #[inline]
+    fn load_lanes(&mut self, lanes: &RegionLanes) {
+        self.base.copy_used_from(&lanes.lobes);
+        let n = lanes.lobes.blocks_used();
+        self.base_mean_cosine[..n].copy_from_slice(&lanes.mean_cosine[..n]);
     }
 
     /// Index of the region loaded by `init`, if any (stable until the next `Field::update`).
@@ -126,8 +138,9 @@ impl VolumeDistribution {
     ///
     /// [`apply_hg_product`]: Self::apply_hg_product
     pub fn apply_hg_weights(&mut self, ray_dir: Vec3, g: f32) {
-        let ok = self.product.set_reweighted(&self.base, |mean, kappa| {
-            lanes::hg_pdf(ray_dir.dot(mean), g * lanes::mean_cosine(kappa))
+        let mean_cosine = &self.base_mean_cosine;
+        let ok = self.product.set_reweighted(&self.base, |mean, _, k| {
+            lanes::hg_pdf(ray_dir.dot(mean), g * mean_cosine[k / LANES][k % LANES])
         });
         self.kind = if ok { ProductKind::HenyeyGreensteinWeights } else { ProductKind::None };
     }
@@ -154,8 +167,9 @@ impl VolumeDistribution {
     /// so lobes below the surface keep only what their spread reaches above it. Left without
     /// a product where no lobe keeps any weight.
     pub fn apply_cosine_weights(&mut self, normal: Vec3) {
-        let ok = self.product.set_reweighted(&self.base, |mean, kappa| {
-            let a = lanes::mean_cosine(kappa);
+        let mean_cosine = &self.base_mean_cosine;
+        let ok = self.product.set_reweighted(&self.base, |mean, _, k| {
+            let a = mean_cosine[k / LANES][k % LANES];
             a * normal.dot(mean).max(0.0) + (1.0 - a) * 0.25
         });
         self.kind = if ok { ProductKind::CosineWeights } else { ProductKind::None };
@@ -249,7 +263,7 @@ mod tests {
 
     fn with_mixture(m: &Mixture, fluence: f32) -> VolumeDistribution {
         let mut d = VolumeDistribution::default();
-        d.base.set_from(m);
+        d.load_lanes(&RegionLanes::new(m));
         d.fluence = fluence;
         d
     }

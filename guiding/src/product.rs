@@ -17,7 +17,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use crate::lanes::{self, LANES};
-use crate::mixture::{ONE_BELOW, pick};
+use crate::mixture::{MAX_LOBES, ONE_BELOW, pick};
 use crate::vmf;
 use glam::{DVec3, Vec2, Vec3};
 use std::f32::consts::PI;
@@ -54,7 +54,7 @@ pub const COSINE_KAPPA: f32 = 2.188_53;
 /// One block of [`LANES`] lobes in structure-of-arrays form, the unit the lane-wise loops
 /// work on. Lanes past a set's length carry zero weight (and a valid uniform lobe), so whole
 /// blocks can be evaluated without masks.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 struct Block {
     x: [f32; LANES],
     y: [f32; LANES],
@@ -129,7 +129,7 @@ impl BlockProduct {
 }
 
 /// A fixed-capacity set of weighted vMF lobes: `B` blocks of [`LANES`] lobes.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub(crate) struct LobeSet<const B: usize> {
     blocks: [Block; B],
     len: usize,
@@ -159,7 +159,7 @@ impl<const B: usize> LobeSet<B> {
         self.len
     }
 
-    fn blocks_used(&self) -> usize {
+    pub(crate) fn blocks_used(&self) -> usize {
         self.len.div_ceil(LANES)
     }
 
@@ -187,6 +187,14 @@ impl<const B: usize> LobeSet<B> {
         }
         self.len = n;
         self.clear_tail();
+    }
+
+    /// Copies `other`'s lobes (only the blocks in use).
+    #[inline]
+    pub(crate) fn copy_used_from(&mut self, other: &Self) {
+        let n = other.blocks_used();
+        self.blocks[..n].copy_from_slice(&other.blocks[..n]);
+        self.len = other.len;
     }
 
     /// Sets this set to the normalised product of `base` with the mixture `factor` of lobes
@@ -293,19 +301,19 @@ impl<const B: usize> LobeSet<B> {
     }
 
     /// Sets this set to the lobes of `base` with lobe `k`'s weight multiplied by
-    /// `factor(mean, kappa)`, renormalised. Returns false when no weight is left (a factor
+    /// `factor(mean, kappa, k)`, renormalised. Returns false when no weight is left (a factor
     /// that is zero, negative or not finite everywhere); the set is then not usable.
     pub(crate) fn set_reweighted<const M: usize>(
         &mut self,
         base: &LobeSet<M>,
-        factor: impl Fn(Vec3, f32) -> f32,
+        factor: impl Fn(Vec3, f32, usize) -> f32,
     ) -> bool {
         let blocks = base.blocks_used().min(B);
         let mut lane_total = [0.0f32; LANES];
-        for (o, b) in self.blocks.iter_mut().zip(&base.blocks[..blocks]) {
+        for (i, (o, b)) in self.blocks.iter_mut().zip(&base.blocks[..blocks]).enumerate() {
             *o = *b;
             for j in 0..LANES {
-                let f = factor(b.mean(j), b.kappa[j]);
+                let f = factor(b.mean(j), b.kappa[j], i * LANES + j);
                 let w = b.weight[j] * f;
                 // Also drops lanes without weight, whatever the factor makes of them.
                 let keep = w > 0.0 && w < f32::INFINITY;
@@ -370,6 +378,29 @@ impl<const B: usize> LobeSet<B> {
         let (k, ux) = pick(weights, self.len, u.x.min(ONE_BELOW));
         let (b, j) = (&self.blocks[k / LANES], k % LANES);
         vmf::sample(b.mean(j), b.kappa[j], Vec2::new(ux, u.y))
+    }
+}
+
+/// A region's mixture as the lane blocks a [`crate::VolumeDistribution`] works on, with each
+/// lobe's mean cosine: derived from the mixture once per field update instead of at every
+/// lookup (the transpose, and the mean cosines HG reweighting needs) and never saved.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub(crate) struct RegionLanes {
+    pub(crate) lobes: LobeSet<{ MAX_LOBES / LANES }>,
+    pub(crate) mean_cosine: [[f32; LANES]; MAX_LOBES / LANES],
+}
+
+impl RegionLanes {
+    pub(crate) fn new(mixture: &crate::Mixture) -> Self {
+        let mut lobes = LobeSet::default();
+        lobes.set_from(mixture);
+        let mut mean_cosine = [[0.0; LANES]; MAX_LOBES / LANES];
+        for (m, b) in mean_cosine.iter_mut().zip(&lobes.blocks) {
+            for j in 0..LANES {
+                m[j] = lanes::mean_cosine(b.kappa[j]);
+            }
+        }
+        Self { lobes, mean_cosine }
     }
 }
 

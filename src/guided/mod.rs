@@ -329,7 +329,7 @@ impl RadianceCache for FieldCache<'_> {
         }
         let region = &self.field.regions()[i];
         let (direct, axis) = self.direct.map_or((0.0, Vec3A::ZERO), |d| (d.get(i), d.axis(i)));
-        let li = region.fluence() * region.mixture().pdf(w.into());
+        let li = region.fluence() * region.density(w.into());
         // The field's own (indirect) part is taken as isotropic, an order of magnitude cheaper
         // than its HG convolution per segment; the direct part, often sharply directional,
         // keeps its direction.

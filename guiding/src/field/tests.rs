@@ -263,6 +263,9 @@ fn saved_and_loaded_field_answers_identically() {
             b.inscattered_radiance(ray, 0.7).to_bits()
         );
         assert_eq!(a.fluence().to_bits(), b.fluence().to_bits());
+        a.apply_hg_weights(ray, 0.6);
+        b.apply_hg_weights(ray, 0.6);
+        assert_eq!(a.pdf(-ray).to_bits(), b.pdf(-ray).to_bits());
         a.apply_hg_product(ray, -0.4);
         b.apply_hg_product(ray, -0.4);
         let (sa, pa) = a.sample_with_pdf(uv);
@@ -275,6 +278,28 @@ fn saved_and_loaded_field_answers_identically() {
     field.update(&next).unwrap();
     loaded.update(&next).unwrap();
     assert_eq!(loaded.regions(), field.regions());
+}
+
+#[test]
+fn region_lanes_follow_the_mixture_through_training() {
+    // The lane copy every lookup loads must be refreshed whenever EM or split-and-merge
+    // change a mixture: its density must match the mixture's in every region, every pass.
+    let mut field = Field::new(small_config()).unwrap();
+    let mut rng = Pcg32::new(8, 3);
+    for pass in 0..3 {
+        field.update(&clustered_batch(pass + 40, 20_000)).unwrap();
+        assert!(field.regions().len() > 4);
+        for (i, r) in field.regions().iter().enumerate() {
+            for _ in 0..50 {
+                let d = vmf::sample(Vec3::Z, 0.0, Vec2::new(u01(&mut rng), u01(&mut rng)));
+                let (lanes, mixture) = (r.density(d), r.mixture().pdf(d));
+                assert!(
+                    (lanes - mixture).abs() <= 1e-5 * mixture + 1e-9,
+                    "pass {pass} region {i}: {lanes} vs {mixture}"
+                );
+            }
+        }
+    }
 }
 
 #[test]
