@@ -39,34 +39,56 @@ pub enum OutputError {
 
 /// Reads the first RGB(A) layer of an EXR file as row-major pixels: (width, height, pixels).
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), OutputError> {
-    let (w, h, pixels, _) = read_exr_with_error(path)?;
-    Ok((w, h, pixels))
+    let exr_error = |e: exr::error::Error| OutputError::Exr {
+        path: path.display().to_string(),
+        message: e.to_string(),
+    };
+    let image = exr::prelude::read_first_rgba_layer_from_file(
+        path,
+        |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
+        |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.y() * *w + pos.x()] = [r, g, b],
+    )
+    .map_err(exr_error)?;
+    let (w, pixels) = image.layer_data.channel_data.pixels;
+    Ok((w, pixels.len() / w.max(1), pixels))
 }
 
-/// Reads an EXR file's first RGB(A) layer and, if it has one (as `zerovar reference` writes),
-/// its layer named `stderr`: (width, height, pixels, standard errors).
+/// Reads an EXR file's image and, if it has one (as `zerovar reference` writes), its layer
+/// named `stderr`: (width, height, pixels, standard errors). The image is the first RGB(A)
+/// layer not named `stderr`; a file with layers that are not RGB (AOVs, depth) gives its
+/// first RGB layer and no standard error.
 #[allow(clippy::type_complexity)]
 pub fn read_exr_with_error(
     path: &Path,
 ) -> Result<(usize, usize, Vec<[f32; 3]>, Option<Vec<[f32; 3]>>), OutputError> {
-    let image = exr::prelude::read_all_rgba_layers_from_file(
+    let fail = |message: String| OutputError::Exr { path: path.display().to_string(), message };
+    let Ok(image) = exr::prelude::read_all_rgba_layers_from_file(
         path,
         |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
         |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
             px[pos.y() * *w + pos.x()] = [r, g, b]
         },
-    )
-    .map_err(|e| OutputError::Exr { path: path.display().to_string(), message: e.to_string() })?;
-    let mut layers = image.layer_data.into_iter();
-    let first = layers.next().ok_or_else(|| OutputError::Exr {
-        path: path.display().to_string(),
-        message: "no RGB layer".into(),
-    })?;
-    let (w, pixels) = first.channel_data.pixels;
-    let error = layers
-        .find(|l| l.attributes.layer_name.as_ref().is_some_and(|n| n.eq("stderr")))
-        .map(|l| l.channel_data.pixels.1)
-        .filter(|e| e.len() == pixels.len());
+    ) else {
+        let (w, h, pixels) = read_exr(path)?;
+        return Ok((w, h, pixels, None));
+    };
+    let (mut mean, mut error) = (None, None);
+    for layer in image.layer_data {
+        let is_error = layer.attributes.layer_name.as_ref().is_some_and(|n| n.eq("stderr"));
+        let slot = if is_error { &mut error } else { &mut mean };
+        slot.get_or_insert(layer.channel_data.pixels);
+    }
+    let (w, pixels) = mean.ok_or_else(|| fail("no RGB layer besides `stderr`".into()))?;
+    let error = error.map(|(_, e)| e);
+    if let Some(e) = &error
+        && e.len() != pixels.len()
+    {
+        return Err(fail(format!(
+            "its `stderr` layer has {} pixels but the image {}; write the reference again with `zerovar reference`",
+            e.len(),
+            pixels.len()
+        )));
+    }
     Ok((w, pixels.len() / w.max(1), pixels, error))
 }
 
@@ -165,4 +187,30 @@ pub fn write_png(
         pixels.iter().flat_map(|c| c.map(|v| (srgb(v * gain) * 255.0 + 0.5) as u8)).collect();
     image::save_buffer(path, &bytes, width, height, image::ColorType::Rgb8)
         .map_err(|e| OutputError::Png { path: path.display().to_string(), message: e.to_string() })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_standard_error_layer_reads_back_only_where_written() {
+        let dir = std::env::temp_dir().join(format!("zerovar-output-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let meta = ImageMetadata { spp: 4, seconds: 1.0, seed: 7, scene: "s.toml".into() };
+        let (w, h) = (5u32, 3u32);
+        let mean: Vec<[f32; 3]> = (0..15).map(|i| [i as f32, 0.5, -1.0]).collect();
+        let error: Vec<[f32; 3]> = (0..15).map(|i| [0.1 * i as f32, 0.2, 0.3]).collect();
+        let with = dir.join("with.exr");
+        write_exr_with_error(&with, w, h, &mean, &error, &meta).unwrap();
+        let (rw, rh, m, e) = read_exr_with_error(&with).unwrap();
+        assert_eq!((rw, rh), (5, 3));
+        assert_eq!((m, e), (mean.clone(), Some(error)));
+        let without = dir.join("without.exr");
+        write_exr(&without, w, h, &mean, &meta).unwrap();
+        let (_, _, m, e) = read_exr_with_error(&without).unwrap();
+        assert_eq!((m, e), (mean.clone(), None));
+        assert_eq!(read_exr(&with).unwrap().2, mean);
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
