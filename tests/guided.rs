@@ -529,6 +529,64 @@ fn every_guided_component_converges_to_the_unguided_image() {
 }
 
 #[test]
+fn training_images_combined_by_inverse_variance_converge_to_the_unguided_image() {
+    // One weight per image, estimated from the images themselves: the combined image is
+    // checked over independent renders, each quadrant's mean luminance over 16 seeds against
+    // the unguided reference, the spread over seeds giving the standard error.
+    for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
+        let s = scene(text);
+        let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
+        let [w, h] = s.camera().resolution().map(|v| v as usize);
+        let mut quadrants: [MeanEstimate; 4] = Default::default();
+        let mut moved = 0.0f64;
+        for seed in 0..16 {
+            let guiding = GuidingOptions {
+                components: Components::FULL,
+                train: TrainBudget::Passes(4),
+                combine_training: true,
+                ..GuidingOptions::default()
+            };
+            let options =
+                RenderOptions { budget: Budget::Samples(16), seed, threads: None, guiding };
+            let r = render(&s, &options, &|_, _| true).unwrap();
+            let own = r.film.image();
+            moved = moved
+                .max(r.image.iter().zip(&own).map(|(a, b)| f64::from((a[1] - b[1]).abs())).sum());
+            let mut sums = [0.0f64; 4];
+            for (i, c) in r.image.iter().enumerate() {
+                let k = usize::from(i % w >= w / 2) + 2 * usize::from(i / w >= h / 2);
+                sums[k] += [0.212_671, 0.715_160, 0.072_169]
+                    .iter()
+                    .zip(c)
+                    .map(|(wt, v)| wt * f64::from(*v))
+                    .sum::<f64>();
+            }
+            for (k, q) in quadrants.iter_mut().enumerate() {
+                q.push(sums[k] / quadrant_pixels(w, h, k) as f64);
+            }
+        }
+        assert!(moved > 0.0, "{name}: the training images did not enter the image");
+        for (k, (q, r)) in quadrants.iter().zip(&reference).enumerate() {
+            let z = (q.mean - r.mean) / (q.std_error().powi(2) + r.var).sqrt();
+            assert!(
+                z.abs() < 4.5,
+                "{name}, quadrant {k}: combined {} +- {} vs unguided {} (z = {z:.2})",
+                q.mean,
+                q.std_error(),
+                r.mean
+            );
+        }
+    }
+}
+
+/// Pixels in quadrant `k` (as `quadrant_means` splits the image) of a `w` x `h` image.
+fn quadrant_pixels(w: usize, h: usize, k: usize) -> usize {
+    let cols = if k % 2 == 1 { w - w / 2 } else { w / 2 };
+    let rows = if k / 2 == 1 { h - h / 2 } else { h / 2 };
+    cols * rows
+}
+
+#[test]
 fn adaptive_guiding_converges_to_the_unguided_image() {
     // Whichever tiles the pilot guides, and with whichever candidate (the requested
     // components, or roulette alone beside more), each pixel averages samples of one unbiased
