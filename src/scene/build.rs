@@ -12,7 +12,7 @@ use crate::media::{
     AlbedoField, DensityField, Grid, Heterogeneous, Medium, MediumKind, VdbGrid, VolGrid,
 };
 use crate::phase::PhaseFunction;
-use crate::shapes::{Cuboid, Disk, Geometry, Mesh, Sphere};
+use crate::shapes::{Cuboid, Disk, Geometry, Mesh, Parallelogram, Sphere};
 use crate::tracking::Tracker;
 use crate::transform::Transform;
 use glam::{Vec2, Vec3, Vec3A};
@@ -270,7 +270,10 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
             cx.only(&format!("{}s", d.kind), &[not_sphere.as_slice(), &not_obj].concat())?;
             Ok(match d.kind.as_str() {
                 "cube" => Geometry::Cuboid(Cuboid::new(to_world)),
-                "rectangle" => Geometry::Mesh(Mesh::rectangle(&to_world)),
+                "rectangle" => match Parallelogram::new(&to_world) {
+                    Some(r) => Geometry::Parallelogram(r),
+                    None => return cx.err("the transform flattens the rectangle to zero area"),
+                },
                 _ => Geometry::Disk(Disk::new(to_world)),
             })
         }

@@ -1,5 +1,6 @@
-//! Geometry: analytic spheres, disks and boxes (cubes under an affine map) and triangle meshes
-//! (which also carry rectangles), their ray intersection, surface parameterisation and area sampling for emitters.
+//! Geometry: analytic spheres, disks, rectangles and boxes (squares and cubes under an affine
+//! map) and triangle meshes, their ray intersection, surface parameterisation and area
+//! sampling for emitters.
 //!
 //! Everything is stored in world space once the scene is built, so a ray never needs to be
 //! transformed during traversal; the acceleration structure (`accel`) refers to primitives by
@@ -8,12 +9,14 @@
 mod cuboid;
 mod disk;
 mod mesh;
+mod parallelogram;
 mod ply;
 mod sphere;
 
 pub use cuboid::Cuboid;
 pub use disk::Disk;
 pub use mesh::{Mesh, MeshError};
+pub use parallelogram::Parallelogram;
 pub use ply::PlyError;
 pub use sphere::Sphere;
 
@@ -66,6 +69,8 @@ pub enum Geometry {
     Disk(Disk),
     /// An analytic box (a cube under an affine map).
     Cuboid(Cuboid),
+    /// An analytic rectangle (a square under an affine map).
+    Parallelogram(Parallelogram),
     /// A triangle mesh.
     Mesh(Mesh),
 }
@@ -85,6 +90,7 @@ impl Geometry {
             Geometry::Sphere(s) => s.bounds(),
             Geometry::Disk(d) => d.bounds(),
             Geometry::Cuboid(c) => c.bounds(),
+            Geometry::Parallelogram(r) => r.bounds(),
             Geometry::Mesh(m) => m.triangle_bounds(i),
         }
     }
@@ -96,6 +102,7 @@ impl Geometry {
             Geometry::Sphere(s) => s.intersect(ray, t_max),
             Geometry::Disk(d) => d.intersect(ray, t_max),
             Geometry::Cuboid(c) => c.intersect(ray, t_max),
+            Geometry::Parallelogram(r) => r.intersect(ray, t_max),
             Geometry::Mesh(m) => m.intersect_triangle(i, ray, t_max),
         }
     }
@@ -106,6 +113,7 @@ impl Geometry {
             Geometry::Sphere(s) => s.surface(ray, hit),
             Geometry::Disk(d) => d.surface(ray, hit),
             Geometry::Cuboid(c) => c.surface(ray, hit),
+            Geometry::Parallelogram(r) => r.surface(ray, hit),
             Geometry::Mesh(m) => m.surface(i, ray, hit),
         }
     }
@@ -116,6 +124,7 @@ impl Geometry {
             Geometry::Sphere(s) => s.area(),
             Geometry::Disk(d) => d.area(),
             Geometry::Cuboid(c) => c.area(),
+            Geometry::Parallelogram(r) => r.area(),
             Geometry::Mesh(m) => m.area(),
         }
     }
@@ -127,6 +136,9 @@ impl Geometry {
             Geometry::Sphere(s) => s.sample(reference, u),
             Geometry::Disk(d) => area_to_solid_angle(reference, d.sample_area(u), d.area()),
             Geometry::Cuboid(c) => area_to_solid_angle(reference, c.sample_area(u), c.area()),
+            Geometry::Parallelogram(r) => {
+                area_to_solid_angle(reference, r.sample_area(u), r.area())
+            }
             Geometry::Mesh(m) => area_to_solid_angle(reference, m.sample_area(u), m.area()),
         }
     }
