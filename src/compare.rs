@@ -243,15 +243,12 @@ pub fn run(
             image,
         });
     }
-    let last = |r: &MethodResult| r.checkpoints.last().expect("four checkpoints").clone();
-    let basis =
-        if results.iter().all(|r| last(r).error.reference_noise.is_some_and(|n| n.resolved())) {
-            ErrorBasis::Excess
-        } else {
-            ErrorBasis::RelMse
-        };
+    let resolved = |r: &MethodResult| {
+        r.checkpoints.last().and_then(|c| c.error.reference_noise).is_some_and(|n| n.resolved())
+    };
+    let basis = if results.iter().all(resolved) { ErrorBasis::Excess } else { ErrorBasis::RelMse };
     for r in &mut results {
-        let c = last(r);
+        let c = r.checkpoints.last().expect("four checkpoints");
         r.error_basis = basis;
         r.error = match (basis, c.error.reference_noise) {
             (ErrorBasis::Excess, Some(n)) => n.excess.all,

@@ -712,31 +712,36 @@ fn final_phase(
     }
 }
 
-/// Mean per-pixel relative variance of a film's pixel means (luminance over `reference`'s
-/// squared luminance plus relMSE's epsilon), the weight's inverse: relMSE is what the
-/// combination should minimise, and absolute variance would let the brightest pixels decide.
-fn image_variance(film: &Film, reference: &Film) -> f64 {
+/// Mean per-pixel relative variance of a film's pixel means: luminance variance times
+/// `weights`, relMSE's per-pixel weight. That is what the combination should minimise;
+/// absolute variance would let the brightest pixels decide.
+fn image_variance(film: &Film, weights: &[f64]) -> f64 {
     let total: f64 = film
         .pixels()
         .iter()
-        .zip(reference.pixels())
-        .map(|(p, r)| {
-            let m = crate::math::luminance(glam::Vec3A::from(r.mean())) as f64;
-            p.luminance_variance() / f64::from(p.count.max(1)) / (m * m + crate::metrics::EPSILON)
-        })
+        .zip(weights)
+        .map(|(p, w)| w * p.luminance_variance() / f64::from(p.count.max(1)))
         .sum();
     total / film.pixels().len().max(1) as f64
 }
 
 /// The images of `training` and `last` averaged with weights inversely proportional to their
-/// estimated relative variance (equal weights if a variance is zero). The weights are one per
-/// image, so the average stays unbiased up to their own estimation noise, which averages
-/// over every pixel.
+/// estimated relative variance (equal weights if a variance is zero), relative to `last`'s
+/// values. The weights are one per image, so the average stays unbiased up to their own
+/// estimation noise, which averages over every pixel.
 fn combine_by_inverse_variance(training: &[Film], last: &Film) -> Vec<[f32; 3]> {
     let films: Vec<&Film> = training.iter().chain(std::iter::once(last)).collect();
+    let relative: Vec<f64> = last
+        .pixels()
+        .iter()
+        .map(|r| {
+            let m = f64::from(crate::math::luminance(glam::Vec3A::from(r.mean())));
+            1.0 / (m * m + crate::metrics::EPSILON)
+        })
+        .collect();
     let weights: Vec<f64> = films
         .iter()
-        .map(|f| image_variance(f, last))
+        .map(|f| image_variance(f, &relative))
         .map(|v| if v > 0.0 && v.is_finite() { 1.0 / v } else { 0.0 })
         .collect();
     let total: f64 = weights.iter().sum();
