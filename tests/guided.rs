@@ -491,6 +491,26 @@ fn render_adaptive(
     r
 }
 
+/// Every guided decision weighs radiance against radiance (weight windows centre on a share
+/// of the image's mean, not on a constant), so the scene's units cannot change it: with the
+/// light 2^10 times dimmer or brighter every decision is the same and the image is exactly
+/// the scaled one (a power of two scales every float exactly). The constant floor the windows
+/// had before rouletted nearly every path of the dim scene.
+#[test]
+fn guided_renders_do_not_depend_on_the_scenes_units() {
+    let base = render_with(&scene(FOG), Components::FULL, 0.5, 8, 5).image();
+    assert!(base.iter().any(|p| p[1] > 0.0));
+    for k in [-10i32, 10] {
+        let scale = 2f32.powi(k);
+        let text = FOG.replace("intensity = 15", &format!("intensity = {}", 15.0 * scale));
+        assert_ne!(text, FOG);
+        let scaled = render_with(&scene(&text), Components::FULL, 0.5, 8, 5).image();
+        for (i, (a, b)) in base.iter().zip(&scaled).enumerate() {
+            assert_eq!(a.map(|c| c * scale), *b, "light x2^{k}, pixel {i}");
+        }
+    }
+}
+
 #[test]
 fn every_guided_component_converges_to_the_unguided_image() {
     let mut worst = 0.0f64;

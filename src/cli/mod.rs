@@ -118,7 +118,8 @@ struct GuidingArgs {
     /// Training passes of 1, 2, 4, ... samples per pixel before rendering.
     #[arg(long, default_value_t = 5, conflicts_with = "train_time")]
     train_passes: u32,
-    /// Train for this many seconds (doubling passes) instead of a fixed number of passes.
+    /// Train for this many seconds (doubling passes) instead of a fixed number of passes; with
+    /// --time, the seconds training leaves unspent go to the render.
     #[arg(long, allow_negative_numbers = true)]
     train_time: Option<f64>,
 }
