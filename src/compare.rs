@@ -58,8 +58,9 @@ pub enum CompareError {
 impl Method {
     /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
     /// distances, rr, full or a +-list), `alpha`, `train-passes`, `train-time` (seconds),
-    /// `tracker` (a `--tracker` name), `combine` (true: training images join the result by
-    /// inverse variance, as `--combine-training`). `NAME` alone means `base` unchanged.
+    /// `tracker` (a `--tracker` name), `combine` (true, the default: training images join the
+    /// result by inverse variance; false discards them, as `--training-images`). `NAME` alone
+    /// means `base` unchanged.
     pub fn parse(spec: &str, base: &RenderOptions) -> Result<Self, CompareError> {
         let err = |why: String| CompareError::Method { spec: spec.to_string(), why };
         let (name, rest) = spec.split_once('=').unwrap_or((spec, ""));
@@ -371,14 +372,15 @@ mod tests {
     #[test]
     fn method_options_parse_and_bad_ones_are_named() {
         let base = RenderOptions::unguided(Budget::Samples(4), 1);
-        let m = Method::parse("g=guiding:full,alpha:0.7,train-passes:3,combine:true", &base)
+        let m = Method::parse("g=guiding:full,alpha:0.7,train-passes:3,combine:false", &base)
             .expect("valid method");
         assert_eq!(m.name, "g");
-        assert!(m.options.guiding.components.any() && m.options.guiding.combine_training);
+        assert!(m.options.guiding.components.any() && !m.options.guiding.combine_training);
         assert_eq!(m.options.guiding.alpha, 0.7);
         assert_eq!(m.options.guiding.train, TrainBudget::Passes(3));
         let plain = Method::parse("u", &base).expect("a bare name");
-        assert!(!plain.options.guiding.combine_training && !plain.options.guiding.components.any());
+        // Training images are combined unless a method says otherwise.
+        assert!(plain.options.guiding.combine_training && !plain.options.guiding.components.any());
         for (spec, says) in [
             ("g=combine:maybe", "combine: `maybe` is not true or false"),
             ("g=alpha:2", "alpha 2 must lie in [0, 1]"),

@@ -182,6 +182,7 @@ fn bad_arguments_fail_clearly() {
         (vec!["render", s, "-D", "nosuch=1"], "nosuch"),
         (vec!["render", s, "-D", "novalue"], "KEY=VALUE"),
         (vec!["render", "/nonexistent/scene.toml"], "/nonexistent/scene.toml"),
+        (vec!["render", s, "--training-images", "keep"], "combine, discard"),
     ] {
         let o = zerovar(&args);
         let err = stderr(&o);

@@ -198,9 +198,19 @@ struct RenderArgs {
     /// Render guided by a field saved by `zerovar train` (no training phase).
     #[arg(long, value_name = "FIELD")]
     field: Option<PathBuf>,
-    /// Average the training passes' images into the result by inverse variance.
-    #[arg(long)]
-    combine_training: bool,
+    /// What becomes of the training passes' images: combine (averaged into the result by
+    /// inverse variance) or discard.
+    #[arg(long, value_enum, default_value_t = TrainingImages::Combine, value_name = "WHAT")]
+    training_images: TrainingImages,
+}
+
+/// What `render` does with the training passes' images.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum TrainingImages {
+    /// Average them into the result, one weight per image by its inverse relative variance.
+    Combine,
+    /// Drop them: the result is the render phase's samples alone.
+    Discard,
 }
 
 /// A fully validated render request.
@@ -513,7 +523,8 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
     }
     let guiding =
         validate_guiding(&a.guiding, a.field.is_some().then_some("rendering with --field"))?;
-    let guiding = GuidingOptions { combine_training: a.combine_training, ..guiding };
+    let combine_training = a.training_images == TrainingImages::Combine;
+    let guiding = GuidingOptions { combine_training, ..guiding };
     if let Some(f) = &a.field
         && !f.is_file()
     {

