@@ -105,8 +105,10 @@ pub(super) struct Choice {
 
 /// The fewest samples per pixel of the pilot that chooses the tiles to render guided: a
 /// 2-sample variance is so noisy that the choice follows it (on the occluded light, trained
-/// for 5 s, a 2 spp pilot left 50 of 180 tiles unguided and doubled the error).
-pub(super) const MIN_TILE_PILOT_SPP: u32 = 4;
+/// for 5 s, a 2 spp pilot left 50 of 180 tiles unguided and doubled the error), and with 4
+/// the occluded light's heavy-tailed samples still made two of four seeds prefer roulette
+/// alone, at 1.65x full guiding's error; with 8 all four chose full guiding.
+pub(super) const MIN_TILE_PILOT_SPP: u32 = 8;
 
 /// Runs the pilot with `guidance`'s field; returns which tiles to guide and how, or `None`
 /// when the render was cancelled. `last_pass` is the spp of the last training pass, which
