@@ -288,7 +288,7 @@ pub fn render(
             estimate: pixel_estimates(&films),
             guided_tiles: None,
         };
-        let options = &with_unused_training_time(options, report.seconds, 0.0);
+        let options = &with_unused_training_time(options, report.seconds);
         Ok(guided_phase(scene, options, guidance, films, threads, progress, Some(report)))
     })
 }
@@ -325,7 +325,8 @@ fn early_pilot(
         training.seconds += selection.seconds;
         return None;
     }
-    let options = with_unused_training_time(options, training.seconds, selection.seconds);
+    let mut options = with_unused_training_time(options, training.seconds);
+    spend(&mut options, selection.seconds);
     // Training ends here: its films go to the render (for `combine_training`).
     let report = training.report();
     let films = std::mem::take(&mut training.films);
@@ -337,23 +338,23 @@ fn early_pilot(
 
 /// `options` for the render phase: with a time budget for both training and rendering, the
 /// training time not spent (training stops when its next, twice as long, pass would overrun)
-/// goes to the render, less `spent` seconds already used otherwise (a pilot). The two budgets
-/// together are what the caller pays for: before, `compare`'s equal-time runs of 20 s used
-/// 17.4-17.8 s for guided methods whose last training pass did not fit.
-fn with_unused_training_time(
-    options: &RenderOptions,
-    training_seconds: f64,
-    spent: f64,
-) -> RenderOptions {
+/// goes to the render. The two budgets together are what the caller pays for: before,
+/// `compare`'s equal-time runs of 20 s used 17.4-17.8 s for guided methods whose last
+/// training pass did not fit.
+fn with_unused_training_time(options: &RenderOptions, training_seconds: f64) -> RenderOptions {
     let mut options = options.clone();
     if let (Budget::Time(t), TrainBudget::Time(tt)) = (options.budget, options.guiding.train) {
         let unused = (tt.as_secs_f64() - training_seconds).max(0.0);
-        let left = (t.as_secs_f64() + unused - spent).max(0.0);
-        options.budget = Budget::Time(Duration::from_secs_f64(left));
-    } else if let Budget::Time(t) = options.budget {
-        options.budget = Budget::Time(Duration::from_secs_f64((t.as_secs_f64() - spent).max(0.0)));
+        options.budget = Budget::Time(t + Duration::from_secs_f64(unused));
     }
     options
+}
+
+/// Takes `seconds` already spent for the render (a pilot's) out of a time budget.
+fn spend(options: &mut RenderOptions, seconds: f64) {
+    if let Budget::Time(t) = options.budget {
+        options.budget = Budget::Time(t.saturating_sub(Duration::from_secs_f64(seconds)));
+    }
 }
 
 /// Renders `scene` guided by a field trained earlier (no training phase).
@@ -611,10 +612,7 @@ fn guided_phase(
     guidance.guided_tiles = Some(tiles);
     let mut options = options.clone();
     options.guiding.components = components;
-    if let Budget::Time(t) = options.budget {
-        let left = t.saturating_sub(Duration::from_secs_f64(selection.seconds));
-        options.budget = Budget::Time(left);
-    }
+    spend(&mut options, selection.seconds);
     let mut result =
         final_phase(scene, &options, Some(guidance), training_films, threads, progress, report);
     result.seconds += selection.seconds;
@@ -946,30 +944,25 @@ mod tests {
         }
     }
 
+    /// The render's budget after training took `training` seconds and a pilot `pilot`.
+    fn after(options: &RenderOptions, training: f64, pilot: f64) -> RenderOptions {
+        let mut options = with_unused_training_time(options, training);
+        spend(&mut options, pilot);
+        options
+    }
+
     #[test]
     fn training_time_not_spent_goes_to_the_render() {
         let train = TrainBudget::Time(Duration::from_secs(5));
-        assert!(
-            (seconds(&with_unused_training_time(&timed(15.0, train), 3.5, 0.0)) - 16.5).abs()
-                < 1e-9
-        );
+        assert!((seconds(&after(&timed(15.0, train), 3.5, 0.0)) - 16.5).abs() < 1e-9);
         // A pilot's seconds come out of it; an overrun takes nothing away.
-        assert!(
-            (seconds(&with_unused_training_time(&timed(15.0, train), 3.5, 2.0)) - 14.5).abs()
-                < 1e-9
-        );
-        assert!(
-            (seconds(&with_unused_training_time(&timed(15.0, train), 6.0, 0.0)) - 15.0).abs()
-                < 1e-9
-        );
+        assert!((seconds(&after(&timed(15.0, train), 3.5, 2.0)) - 14.5).abs() < 1e-9);
+        assert!((seconds(&after(&timed(15.0, train), 6.0, 0.0)) - 15.0).abs() < 1e-9);
         // Training by passes has no time to give; sample budgets are left alone.
         let passes = TrainBudget::Passes(4);
-        assert!(
-            (seconds(&with_unused_training_time(&timed(15.0, passes), 3.5, 1.0)) - 14.0).abs()
-                < 1e-9
-        );
+        assert!((seconds(&after(&timed(15.0, passes), 3.5, 1.0)) - 14.0).abs() < 1e-9);
         let mut spp = RenderOptions::unguided(Budget::Samples(64), 0);
         spp.guiding.train = train;
-        assert!(matches!(with_unused_training_time(&spp, 1.0, 0.5).budget, Budget::Samples(64)));
+        assert!(matches!(after(&spp, 1.0, 0.5).budget, Budget::Samples(64)));
     }
 }

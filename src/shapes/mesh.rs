@@ -157,8 +157,10 @@ impl Mesh {
         Self::new(ply.positions, normals, ply.uvs, ply.triangles, to_world)
     }
 
-    /// Mitsuba's `rectangle`: [-1, 1]^2 in the z = 0 plane, facing +z.
-    pub fn rectangle(to_world: &Transform) -> Self {
+    /// Mitsuba's `rectangle`: [-1, 1]^2 in the z = 0 plane, facing +z, as two triangles: the
+    /// tests' reference for the analytic `Parallelogram` that scenes use.
+    #[cfg(test)]
+    pub(crate) fn rectangle(to_world: &Transform) -> Self {
         let p = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)];
         let positions = p.iter().map(|&(x, y)| Vec3A::new(x, y, 0.0)).collect();
         let uvs = p.iter().map(|&(x, y)| Vec2::new(0.5 * (x + 1.0), 0.5 * (y + 1.0))).collect();
