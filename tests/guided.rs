@@ -159,6 +159,53 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
     }
 }
 
+/// Extra collisions for delta lights (placed by the cache's direct light, here the default:
+/// its in-scattering, a bright blob off the start of the ray) have the density they report,
+/// which integrates to 1 over the guided stretch and is zero past it; and the flight's own
+/// collision gets the balance heuristic's share against it.
+#[test]
+fn extra_collisions_follow_their_density_which_integrates_to_one() {
+    let cases = [
+        ("type = \"homogeneous\"\nsigma_t = 0.8\nalbedo = 0.7", 6.0f32, 6.0f32),
+        ("type = \"homogeneous\"\nsigma_t = [0.3, 0.8, 2.0]\nalbedo = 0.9", 6.0, 6.0),
+        // A stretch cut at 8 / 0.8 = 10, before the surface at 20: nothing past the cut.
+        ("type = \"homogeneous\"\nsigma_t = 0.8\nalbedo = 0.7", 20.0, 10.0),
+    ];
+    for (text, t_max, stretch) in cases {
+        let medium = medium_of(text);
+        let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
+        let cache = Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), ..Analytic::constant(1.0) };
+        let pick = Vec3A::new(0.2, 0.5, 0.3);
+        let state = RefCell::new((
+            GuidedDistance::new(&medium, &ray, t_max, pick, 0.5, 0.5).unwrap(),
+            cache,
+        ));
+        let pdf = |t: f64| {
+            let (d, c) = &mut *state.borrow_mut();
+            d.direct_density(t as f32, &medium, c) as f64
+        };
+        // Parts are 1 / 16 of the stretch; bins and pieces align with them.
+        let total = integrate_1d(&pdf, 0.0, stretch as f64, 128);
+        assert!((total - 1.0).abs() < 1e-4, "{text}: density integrates to {total}");
+        if t_max > stretch {
+            assert_eq!(integrate_1d(&pdf, stretch as f64, t_max as f64, 16), 0.0, "{text}");
+        }
+        let mut sampler = Sampler::new(9, 0, 0);
+        let samples: Vec<f64> = (0..100_000)
+            .map(|_| {
+                let (d, c) = &mut *state.borrow_mut();
+                let (t, p) =
+                    d.sample_direct(&medium, c, &mut sampler).expect("light along the ray");
+                let expected = d.direct_density(t, &medium, c);
+                assert!((p - expected).abs() <= 1e-5 * expected, "{text}: {p} vs {expected}");
+                t as f64
+            })
+            .collect();
+        let edges: Vec<f64> = (0..=64).map(|i| stretch as f64 * i as f64 / 64.0).collect();
+        chi2_1d(&samples, &pdf, &edges, &[]).assert_pass(1e-3, text);
+    }
+}
+
 /// A cache giving the same estimates everywhere, as guided null-collision flights read them.
 struct Fixed {
     inscattered: f32,
@@ -229,6 +276,7 @@ fn null_collision_guided_weights_stay_bounded_and_unbiased() {
                 t_max,
                 Vec3A::ONE,
                 alpha,
+                false,
                 &mut cache,
                 &mut sampler,
                 &mut counters,
@@ -460,6 +508,13 @@ type = "directional"
 direction = [-0.4, -1, -0.3]
 irradiance = 2
 angular_diameter = 1
+
+# A delta light too: guided flights then draw extra collisions for it, and next-event
+# estimates of the other lights skip them.
+[[lights]]
+type = "point"
+position = [1, 1.6, 0.5]
+intensity = 0.8
 
 [[lights]]
 type = "constant"

@@ -10,9 +10,11 @@
 //! robust where the cache is poor.
 
 pub mod distance;
+mod grid;
 mod saved;
 pub mod window;
 
+pub use grid::DirectGrid;
 pub use saved::{TRAINED_MAGIC, TRAINED_VERSION, TrainedField};
 
 use glam::{Vec2, Vec3A};
@@ -103,12 +105,36 @@ pub trait RadianceCache {
     /// (zero when it found nothing). The field learns only what the continuation brings
     /// back; these complete its fluence for the adjoint (see [`DirectFluence`]).
     fn record_direct(&mut self, _record: DirectRecord) {}
-    /// `(incident(w), inscattered(w, g))` at `x` for distance sampling, or `None` where `load`
-    /// would fail; may be cheaper than `load` (no product state, a coarser in-scattering
-    /// estimate), and may leave the loaded point undefined.
-    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<(f32, f32)> {
-        self.load(x, u).then(|| (self.incident(w), self.inscattered(w, g)))
+    /// `incident(w)` and `inscattered(w, g)` at `x` for distance sampling, or `None` where
+    /// `load` would fail; may be cheaper than `load` (no product state, a coarser
+    /// in-scattering estimate), and may leave the loaded point undefined.
+    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<Estimates> {
+        self.load(x, u)
+            .then(|| Estimates { incident: self.incident(w), inscattered: self.inscattered(w, g) })
     }
+    /// The radiance delta lights scatter towards `-w` at `x` (HG with `g`), for placing extra
+    /// collisions (`distance::ExtraCollision`); called for many points along a ray, so it
+    /// should be cheap. A cache that cannot tell direct from indirect light gives all the
+    /// in-scattered radiance.
+    fn direct(&mut self, x: Vec3A, w: Vec3A, g: f32) -> f32 {
+        self.estimates(x, 0.5, w, g).map_or(0.0, |e| e.inscattered)
+    }
+    /// [`direct`](Self::direct) at the middles of equal parts along a ray, `start + (j + 0.5)
+    /// step` for each `out[j]`, for a path travelling along `w`.
+    fn direct_along(&mut self, start: Vec3A, step: Vec3A, w: Vec3A, g: f32, out: &mut [f32]) {
+        for (j, v) in out.iter_mut().enumerate() {
+            *v = self.direct(start + (j as f32 + 0.5) * step, w, g);
+        }
+    }
+}
+
+/// What distance sampling asks of a cache at a point, for a path travelling along `w`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimates {
+    /// Radiance arriving from `w`: `L(x, w)`.
+    pub incident: f32,
+    /// Radiance scattered towards `-w`: `L_s(x, w)`.
+    pub inscattered: f32,
 }
 
 /// Smallest HG asymmetry `|g|` for which guided directions follow a product with the phase
@@ -136,8 +162,8 @@ pub struct FieldCache<'a> {
     direct_here: (f32, Vec3A),
     /// Direct-fluence records of training paths, when training.
     records: Option<Vec<DirectRecord>>,
-    /// The last `estimates`: region, direction, g, incident and in-scattered radiance.
-    memo: Option<(usize, Vec3A, f32, f32, f32)>,
+    /// The last `estimates`: region, direction, g and the estimates.
+    memo: Option<(usize, Vec3A, f32, Estimates)>,
 }
 
 impl<'a> FieldCache<'a> {
@@ -217,6 +243,9 @@ fn direct_inscattered(fluence: f32, axis: Vec3A, w: Vec3A, g: f32) -> f32 {
 pub struct DirectFluence {
     values: Vec<f32>,
     axes: Vec<Vec3A>,
+    /// The same records on a fine uniform grid, for placing extra collisions: regions are
+    /// far coarser than a shaft of sunlight.
+    grid: DirectGrid,
 }
 
 impl DirectFluence {
@@ -246,7 +275,7 @@ impl DirectFluence {
                 if a.length_squared() > 1.0 { a.normalize() } else { a }
             })
             .collect();
-        Self { values, axes }
+        Self { values, axes, grid: DirectGrid::build(records) }
     }
 
     /// The direct fluence of region `index` (zero when unknown).
@@ -316,27 +345,42 @@ impl RadianceCache for FieldCache<'_> {
         self.dist.pdf(w.into())
     }
     #[inline]
-    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<(f32, f32)> {
+    fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<Estimates> {
         // Straight from the region, without loading its mixture: a ray's segments mostly
         // fall in one region, so the last answer is kept too.
         let i = self.field.lookup_index(x.into(), u)?;
-        if let Some((j, v, gm, li, ls)) = self.memo
+        if let Some((j, v, gm, e)) = self.memo
             && j == i
             && v == w
             && gm == g
         {
-            return Some((li, ls));
+            return Some(e);
         }
         let region = &self.field.regions()[i];
-        let (direct, axis) = self.direct.map_or((0.0, Vec3A::ZERO), |d| (d.get(i), d.axis(i)));
-        let li = region.fluence() * region.density(w.into());
+        let (fluence, axis) = self.direct.map_or((0.0, Vec3A::ZERO), |d| (d.get(i), d.axis(i)));
         // The field's own (indirect) part is taken as isotropic, an order of magnitude cheaper
         // than its HG convolution per segment; the direct part, often sharply directional,
         // keeps its direction.
-        let ls =
-            region.fluence() * crate::math::INV_FOUR_PI + direct_inscattered(direct, axis, w, g);
-        self.memo = Some((i, w, g, li, ls));
-        Some((li, ls))
+        let e = Estimates {
+            incident: region.fluence() * region.density(w.into()),
+            inscattered: region.fluence() * crate::math::INV_FOUR_PI
+                + direct_inscattered(fluence, axis, w, g),
+        };
+        self.memo = Some((i, w, g, e));
+        Some(e)
+    }
+    // Isotropic: exact in its shape along a ray for the sun (one direction everywhere), and a
+    // sampling density needs no more.
+    #[inline]
+    fn direct(&mut self, x: Vec3A, _w: Vec3A, _g: f32) -> f32 {
+        self.direct.map_or(0.0, |d| d.grid.fluence(x) * crate::math::INV_FOUR_PI)
+    }
+    #[inline]
+    fn direct_along(&mut self, start: Vec3A, step: Vec3A, _w: Vec3A, _g: f32, out: &mut [f32]) {
+        match self.direct {
+            Some(d) => d.grid.fluence_along(start, step, out),
+            None => out.fill(0.0),
+        }
     }
     #[inline]
     fn record_direct(&mut self, record: DirectRecord) {

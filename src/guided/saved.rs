@@ -4,18 +4,20 @@
 //!
 //! The file is `ZVTRAIN\0`, a format version (u32), the field's length (u64) and the field in
 //! the guiding crate's own format, then the table: a count (u32), that many f32 values, and
-//! (from version 2) as many mean directions of three f32 each, all little-endian. Version 1
-//! files (no directions: the direct light is then taken as isotropic) and bare guiding-crate
-//! fields (another tool's, or an older `zerovar train`'s, without a table) are read too.
+//! (from version 2) as many mean directions of three f32 each, then (from version 3) the
+//! direct-light grid (`DirectGrid::write`), all little-endian. Version 1 files (no
+//! directions: the direct light is then taken as isotropic), version 2 files (no grid: guided
+//! flights then draw no extra collisions for delta lights) and bare guiding-crate fields
+//! (another tool's, or an older `zerovar train`'s, without a table) are read too.
 
-use super::DirectFluence;
+use super::{DirectFluence, DirectGrid};
 use std::io::{Read, Write};
 use zerovar_guiding::{Field, GuidingError};
 
 /// The first bytes of a trained-field file.
 pub const TRAINED_MAGIC: [u8; 8] = *b"ZVTRAIN\0";
 /// Version of the trained-field layout.
-pub const TRAINED_VERSION: u32 = 2;
+pub const TRAINED_VERSION: u32 = 3;
 
 /// A trained guiding field and what the renderer learned beside it.
 #[derive(Clone, Debug)]
@@ -45,6 +47,10 @@ impl TrainedField {
             for c in a.to_array() {
                 w.write_all(&c.to_le_bytes())?;
             }
+        }
+        match &self.direct {
+            Some(d) => d.grid.write(&mut w)?,
+            None => DirectGrid::default().write(&mut w)?,
         }
         w.flush()?;
         Ok(())
@@ -97,7 +103,8 @@ impl TrainedField {
                 )));
             }
         }
-        let direct = (count > 0).then_some(DirectFluence { values, axes });
+        let grid = if found >= 3 { DirectGrid::read(&mut r)? } else { DirectGrid::default() };
+        let direct = (count > 0).then_some(DirectFluence { values, axes, grid });
         Ok(Self { field, direct })
     }
 }
@@ -150,9 +157,20 @@ mod tests {
         let back = TrainedField::load(&bytes[..]).unwrap();
         assert_eq!(back.direct.as_ref().unwrap().values, t.direct.as_ref().unwrap().values);
         assert_eq!(back.direct.as_ref().unwrap().axes, t.direct.as_ref().unwrap().axes);
+        assert_eq!(back.direct.as_ref().unwrap().grid, t.direct.as_ref().unwrap().grid);
+        assert!(back.direct.as_ref().unwrap().grid.fluence(Vec3A::splat(0.5)) > 0.0);
         assert_eq!(back.field.regions().len(), t.field.regions().len());
+        let mut grid = Vec::new();
+        t.direct.as_ref().unwrap().grid.write(&mut grid).unwrap();
+        let n = bytes.len() - grid.len();
+        // A version 2 file (no grid) loads without one.
+        let mut v2 = bytes[..n].to_vec();
+        v2[8..12].copy_from_slice(&2u32.to_le_bytes());
+        let back = TrainedField::load(&v2[..]).unwrap();
+        assert_eq!(back.direct.as_ref().unwrap().axes, t.direct.as_ref().unwrap().axes);
+        assert_eq!(back.direct.unwrap().grid, DirectGrid::default());
         // A version 1 file (values, no directions) loads with isotropic direct light.
-        let mut old = bytes[..bytes.len() - 12 * t.field.regions().len()].to_vec();
+        let mut old = bytes[..n - 12 * t.field.regions().len()].to_vec();
         old[8..12].copy_from_slice(&1u32.to_le_bytes());
         let back = TrainedField::load(&old[..]).unwrap();
         let direct = back.direct.unwrap();
@@ -167,10 +185,11 @@ mod tests {
         for cut in [4, 12, 20, bytes.len() - 2] {
             assert!(TrainedField::load(&bytes[..cut]).is_err(), "cut at {cut}");
         }
-        // The last value, then the last direction's last component.
-        let n = bytes.len();
+        // The last value, then the last direction's last component, then the grid's last cell
+        // and its scale.
         let last_value = n - 12 * t.field.regions().len() - 4;
-        for (at, what) in [(last_value, "fluence"), (n - 4, "direction")] {
+        let cells = [(last_value, "fluence"), (n - 4, "direction"), (bytes.len() - 4, "grid")];
+        for (at, what) in cells.into_iter().chain([(n + 12, "grid")]) {
             let mut bad = bytes.clone();
             bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
             let e = TrainedField::load(&bad[..]).unwrap_err().to_string();
@@ -178,7 +197,7 @@ mod tests {
         }
         // A direction longer than a mean of unit vectors can be.
         let mut bad = bytes.clone();
-        bad[n - 4..].copy_from_slice(&2.0f32.to_le_bytes());
+        bad[n - 4..n].copy_from_slice(&2.0f32.to_le_bytes());
         assert!(TrainedField::load(&bad[..]).unwrap_err().to_string().contains("direction"));
         assert!(matches!(TrainedField::load(&b"not a field"[..]), Err(GuidingError::BadMagic)));
     }

@@ -158,11 +158,37 @@ fn walk<C: RadianceCache>(
         if let Some(m) = s.medium {
             let mi = m as usize;
             let medium = &scene.media[mi];
+            let mut delta_share = 1.0;
             let (scatter_t, weight, emitted) = if guide.distances && alpha > 0.0 {
+                // A collision past the last depth would not estimate any light.
+                // Extra collisions serve the image, not the field's training (where they cost
+                // 30% more time); one past the last depth would not estimate any light.
+                let extra_nee = scene.has_delta_lights
+                    && ctx.recorder.is_none()
+                    && settings.max_depth.is_none_or(|d| s.depth + 1 < d);
                 let f = guided_flight(
-                    medium, &s.ray, t_max, s.beta, alpha, ctx.cache, sampler, counters,
+                    medium, &s.ray, t_max, s.beta, alpha, extra_nee, ctx.cache, sampler, counters,
                 );
                 s.guided_gain *= f.gain;
+                delta_share = f.delta_share;
+                if let Some(extra) = f.extra {
+                    let p = s.ray.at(extra.t);
+                    let (phase, dir) = (medium.phase, s.ray.direction);
+                    let direct = sample_light(
+                        scene,
+                        p,
+                        None,
+                        s.medium,
+                        sampler,
+                        counters,
+                        NeeLights::Delta,
+                        |wi| Spectrum::splat(phase.eval(dir, wi)),
+                        |_| 0.0,
+                    );
+                    let c = s.beta * extra.weight * direct.contribution;
+                    l += c;
+                    record_contribution(ctx, c);
+                }
                 match f.event {
                     GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted),
                     GuidedEvent::Pass => (None, f.weight, f.emitted),
@@ -221,6 +247,7 @@ fn walk<C: RadianceCache>(
                     s.medium,
                     sampler,
                     counters,
+                    NeeLights::All { delta_share },
                     |wi| Spectrum::splat(phase.eval(dir, wi)),
                     |wi| phase_and_pdf(ctx.cache, wi).1,
                 );
@@ -324,6 +351,7 @@ fn walk<C: RadianceCache>(
                 s.medium,
                 sampler,
                 counters,
+                NeeLights::All { delta_share: 1.0 },
                 |wi| bsdf.eval(wo, frame.to_local(wi), hit.uv),
                 |wi| mix_pdf(ctx.cache, wi),
             );
@@ -474,6 +502,7 @@ fn sample_light(
     medium: Option<u32>,
     sampler: &mut Sampler,
     counters: &mut Counters,
+    lights: NeeLights,
     f: impl Fn(Vec3A) -> Spectrum,
     pdf: impl Fn(Vec3A) -> f32,
 ) -> DirectSample {
@@ -484,6 +513,9 @@ fn sample_light(
         return DirectSample::NONE;
     }
     let light = &scene.lights[((pick * n as f32) as usize).min(n - 1)];
+    if lights == NeeLights::Delta && !light.is_delta() {
+        return DirectSample::NONE;
+    }
     let Some(ls) = light.sample(&scene.shapes, p, u) else { return DirectSample::NONE };
     let f = f(ls.wi);
     if f.max_element() <= 0.0 {
@@ -508,12 +540,28 @@ fn sample_light(
     let light_pdf = ls.pdf / n as f32;
     let w = if ls.delta { 1.0 } else { power_heuristic(light_pdf, pdf(ls.wi)) };
     let arriving = tr * ls.radiance * w;
+    // The share of a delta light another estimate covers too is left out of the contribution
+    // only: the direct-fluence record stays the whole estimate.
+    let share = match lights {
+        NeeLights::All { delta_share } if ls.delta => delta_share,
+        _ => 1.0,
+    };
     DirectSample {
-        contribution: f * arriving / light_pdf,
+        contribution: f * arriving * (share / light_pdf),
         pdf: light_pdf,
         radiance: luminance(arriving),
         direction: dir,
     }
+}
+
+/// The lights a next-event estimate covers.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum NeeLights {
+    /// All lights, delta ones weighted by `delta_share` (their MIS weight against a guided
+    /// flight's extra collision; 1 when there is none).
+    All { delta_share: f32 },
+    /// Delta lights alone, unweighted (an extra collision, which carries its MIS weight).
+    Delta,
 }
 
 fn record_vertex<C: RadianceCache>(

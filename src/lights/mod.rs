@@ -86,6 +86,16 @@ impl Light {
         matches!(self, Light::Directional { .. } | Light::Constant { .. } | Light::EnvMap(_))
     }
 
+    /// Whether the light is a point or a single direction, which only next-event estimation
+    /// can reach.
+    pub fn is_delta(&self) -> bool {
+        match self {
+            Light::Point { .. } | Light::Spot { .. } => true,
+            Light::Directional { one_minus_cos, .. } => *one_minus_cos == 0.0,
+            _ => false,
+        }
+    }
+
     /// Samples a direction towards the light from `p`.
     pub fn sample(&self, shapes: &[Geometry], p: Vec3A, u: Vec2) -> Option<LightSample> {
         let delta = |to: Vec3A, intensity: Spectrum| {

@@ -524,5 +524,8 @@ fn analytic_spectral(
 #[inline]
 pub fn transmittance_homogeneous(sigma_t: Spectrum, t: f32) -> Spectrum {
     let tau = Spectrum::select(sigma_t.cmpeq(Spectrum::ZERO), Spectrum::ZERO, sigma_t * t);
+    if tau.x == tau.y && tau.y == tau.z {
+        return Spectrum::splat((-tau.x).exp()); // grey: one exponential
+    }
     Spectrum::new((-tau.x).exp(), (-tau.y).exp(), (-tau.z).exp())
 }

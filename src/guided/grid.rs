@@ -1,0 +1,214 @@
+//! The direct fluence of training paths on a fine uniform grid: where extra collisions for
+//! next-event estimation of delta lights go (`distance::ExtraCollision`).
+//!
+//! The field's regions adapt to where training paths scatter, not to where direct light
+//! changes, and a shaft of sunlight through a window is narrower than most of them. Next-event
+//! records are plentiful (one per training vertex), and a lookup in a uniform grid costs a
+//! few multiplications, so a ray can ask it at many points.
+
+use super::DirectRecord;
+use glam::{UVec3, Vec3A};
+use std::io::{Read, Write};
+use zerovar_guiding::GuidingError;
+
+/// Most cells a saved grid may claim (64 along the longest side gives at most 2^18).
+const MAX_CELLS: u64 = 1 << 24;
+/// Cells along the grid's longest side.
+const CELLS_LONGEST: f32 = 64.0;
+/// The share of records the grid's box may leave out on each side of each axis: paths in an
+/// open medium wander far, and a box around all of them would spread its cells thin.
+const OUTLIERS: f64 = 1e-3;
+
+/// The mean next-event estimate of the fluence in each cell of a uniform grid over the
+/// training vertices' bounding box (zero outside it and in cells without records).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DirectGrid {
+    min: Vec3A,
+    /// Cells per unit length.
+    scale: f32,
+    dims: UVec3,
+    values: Vec<f32>,
+}
+
+impl DirectGrid {
+    /// The grid of `records`' mean fluence per cell.
+    pub fn build(records: &[DirectRecord]) -> Self {
+        let (min, max) = bounds(records);
+        let extent = (max - min).max_element();
+        if !(extent > 0.0 && extent.is_finite()) {
+            return Self::default();
+        }
+        // Cells a hair larger than extent / CELLS_LONGEST, so the maximum falls inside.
+        let scale = CELLS_LONGEST / (extent * (1.0 + 1e-5));
+        let dims = ((max - min) * scale).floor().as_uvec3() + UVec3::ONE;
+        let mut grid = Self { min, scale, dims, values: Vec::new() };
+        let n = (dims.x * dims.y * dims.z) as usize;
+        let (mut sums, mut counts) = (vec![0.0f64; n], vec![0u32; n]);
+        for r in records {
+            if let Some(i) = grid.index(r.position) {
+                sums[i] += f64::from(r.fluence);
+                counts[i] += 1;
+            }
+        }
+        grid.values = sums
+            .iter()
+            .zip(&counts)
+            .map(|(&s, &c)| if c > 0 { (s / f64::from(c)) as f32 } else { 0.0 })
+            .collect();
+        grid
+    }
+
+    fn index(&self, x: Vec3A) -> Option<usize> {
+        let c = (x - self.min) * self.scale;
+        if !(c.cmpge(Vec3A::ZERO).all() && c.is_finite()) {
+            return None;
+        }
+        let c = c.as_uvec3();
+        (c.cmplt(self.dims).all()).then(|| (c.x + self.dims.x * (c.y + self.dims.y * c.z)) as usize)
+    }
+
+    /// The direct fluence at `start + (j + 0.5) step` for each `out[j]`: a ray's parts, stepped
+    /// through in grid coordinates.
+    #[inline]
+    pub fn fluence_along(&self, start: Vec3A, step: Vec3A, out: &mut [f32]) {
+        let d = step * self.scale;
+        let mut c = (start - self.min) * self.scale + 0.5 * d;
+        let dims = self.dims.as_vec3a();
+        for v in out {
+            *v = if c.cmpge(Vec3A::ZERO).all() && c.cmplt(dims).all() {
+                let i = c.as_uvec3();
+                self.values[(i.x + self.dims.x * (i.y + self.dims.y * i.z)) as usize]
+            } else {
+                0.0
+            };
+            c += d;
+        }
+    }
+
+    /// Writes the grid: its corner and cells per unit length (f32), its cells along each axis
+    /// (u32) and every cell's value (f32), x fastest, all little-endian.
+    pub(super) fn write(&self, w: &mut impl Write) -> std::io::Result<()> {
+        for v in self.min.to_array().into_iter().chain([self.scale]) {
+            w.write_all(&v.to_le_bytes())?;
+        }
+        for d in self.dims.to_array() {
+            w.write_all(&d.to_le_bytes())?;
+        }
+        self.values.iter().try_for_each(|v| w.write_all(&v.to_le_bytes()))
+    }
+
+    /// Reads what [`write`](Self::write) wrote, checking it describes a grid of fluences.
+    pub(super) fn read(r: &mut impl Read) -> Result<Self, GuidingError> {
+        let mut f = || -> Result<f32, GuidingError> { Ok(f32::from_le_bytes(read4(r)?)) };
+        let min = Vec3A::new(f()?, f()?, f()?);
+        let scale = f()?;
+        let dims = UVec3::new(
+            u32::from_le_bytes(read4(r)?),
+            u32::from_le_bytes(read4(r)?),
+            u32::from_le_bytes(read4(r)?),
+        );
+        let n = dims.as_u64vec3().element_product();
+        if n == 0 {
+            return Ok(Self::default());
+        }
+        if n > MAX_CELLS || !(min.is_finite() && scale.is_finite() && scale > 0.0) {
+            return Err(GuidingError::Decode(format!(
+                "the direct-light grid (corner {min}, {scale} cells per unit, {dims} cells) is not                  one `zerovar train` writes"
+            )));
+        }
+        let mut values = Vec::with_capacity(n as usize);
+        for _ in 0..n {
+            let v = f32::from_le_bytes(read4(r)?);
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(GuidingError::Decode(format!("direct-light grid fluence {v}")));
+            }
+            values.push(v);
+        }
+        Ok(Self { min, scale, dims, values })
+    }
+
+    /// The direct fluence at `x` (zero outside the grid).
+    #[inline]
+    pub fn fluence(&self, x: Vec3A) -> f32 {
+        self.index(x).map_or(0.0, |i| self.values[i])
+    }
+}
+
+/// The box holding all finite record positions but the `OUTLIERS` on each side of each axis.
+fn bounds(records: &[DirectRecord]) -> (Vec3A, Vec3A) {
+    let mut coords: Vec<f32> = Vec::with_capacity(records.len());
+    let (mut min, mut max) = (Vec3A::INFINITY, Vec3A::NEG_INFINITY);
+    for axis in 0..3 {
+        coords.clear();
+        coords.extend(records.iter().filter(|r| r.position.is_finite()).map(|r| r.position[axis]));
+        if coords.is_empty() {
+            break;
+        }
+        let cut = (coords.len() as f64 * OUTLIERS) as usize;
+        let last = coords.len() - 1;
+        min[axis] = *coords.select_nth_unstable_by(cut, f32::total_cmp).1;
+        max[axis] = *coords.select_nth_unstable_by(last - cut, f32::total_cmp).1;
+    }
+    (min, max)
+}
+
+fn read4(r: &mut impl Read) -> Result<[u8; 4], GuidingError> {
+    let mut b = [0u8; 4];
+    r.read_exact(&mut b).map_err(|e| GuidingError::Decode(format!("truncated: {e}")))?;
+    Ok(b)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn record(x: f32, y: f32, z: f32, fluence: f32) -> DirectRecord {
+        DirectRecord { position: Vec3A::new(x, y, z), fluence, direction: Vec3A::X }
+    }
+
+    #[test]
+    fn cells_hold_their_records_mean_and_rays_read_them_in_steps() {
+        // A lit slab x < 2 in a box 0..8 x 0..2 x 0..1: 64 cells along x, of 1/8 each.
+        let mut records = Vec::new();
+        for i in 0..64 {
+            for j in 0..16 {
+                let (x, y) = ((i as f32 + 0.5) / 8.0, (j as f32 + 0.5) / 8.0);
+                let lit = if x < 2.0 { 4.0 } else { 0.0 };
+                // Two records per point whose mean is `lit`.
+                records.push(record(x, y, 0.5, lit * 0.5));
+                records.push(record(x, y, 0.5, lit * 1.5));
+            }
+        }
+        records.push(record(0.0, 0.0, 0.0, 0.0));
+        records.push(record(8.0, 2.0, 1.0, 0.0));
+        let grid = DirectGrid::build(&records);
+        assert_eq!(grid.fluence(Vec3A::new(1.0, 1.0, 0.5)), 4.0);
+        assert_eq!(grid.fluence(Vec3A::new(3.0, 1.0, 0.5)), 0.0);
+        // Outside the box, and not a point at all.
+        assert_eq!(grid.fluence(Vec3A::new(-0.1, 1.0, 0.5)), 0.0);
+        assert_eq!(grid.fluence(Vec3A::new(8.5, 1.0, 0.5)), 0.0);
+        assert_eq!(grid.fluence(Vec3A::splat(f32::NAN)), 0.0);
+        // A ray's parts read what single lookups read, out of the box included.
+        let (start, step) = (Vec3A::new(-1.0, 0.3, 0.5), Vec3A::new(0.7, 0.1, 0.0));
+        let mut along = [f32::NAN; 16];
+        grid.fluence_along(start, step, &mut along);
+        for (j, v) in along.iter().enumerate() {
+            assert_eq!(*v, grid.fluence(start + (j as f32 + 0.5) * step), "part {j}");
+        }
+        assert!(along.contains(&4.0) && along.contains(&0.0));
+    }
+
+    #[test]
+    fn degenerate_records_give_an_empty_grid() {
+        for records in
+            [vec![], vec![record(1.0, 1.0, 1.0, 2.0)], vec![record(f32::NAN, 0.0, 0.0, 1.0)]]
+        {
+            let grid = DirectGrid::build(&records);
+            assert_eq!(grid, DirectGrid::default());
+            assert_eq!(grid.fluence(Vec3A::ONE), 0.0);
+            let mut along = [1.0; 4];
+            grid.fluence_along(Vec3A::ZERO, Vec3A::X, &mut along);
+            assert_eq!(along, [0.0; 4]);
+        }
+    }
+}
