@@ -5,8 +5,10 @@
 //! heuristic against phase or BSDF sampling, null surfaces crossed without a bounce, Mitsuba's
 //! depth counting and Russian roulette. Each guided component replaces one decision by its
 //! zero-variance counterpart mixed with the standard one (`guided`): distances, directions
-//! (product sampling) and roulette with splitting (weight windows). Split copies wait on a
-//! fixed-size stack, so a walk never allocates.
+//! (product sampling) and roulette with splitting (weight windows); a guided flight may also
+//! return an extra collision where delta lights are estimated a second time, weighed against
+//! the estimate at its own collision (`guided::distance::guided_flight`). Split copies wait on
+//! a fixed-size stack, so a walk never allocates.
 
 use crate::bsdf::Bsdf;
 use crate::guided::distance::{GuidedEvent, guided_flight};
@@ -160,7 +162,6 @@ fn walk<C: RadianceCache>(
             let medium = &scene.media[mi];
             let mut delta_share = 1.0;
             let (scatter_t, weight, emitted) = if guide.distances && alpha > 0.0 {
-                // A collision past the last depth would not estimate any light.
                 // Extra collisions serve the image, not the field's training (where they cost
                 // 30% more time); one past the last depth would not estimate any light.
                 let extra_nee = scene.has_delta_lights
