@@ -30,6 +30,8 @@ pub struct Counters {
     pub products: u64,
     /// Approximate products: a region's lobes reweighted by the phase function.
     pub reweighted_products: u64,
+    /// Extra collisions of guided flights for next-event estimation of delta lights.
+    pub extra_collisions: u64,
 }
 
 impl std::ops::AddAssign for Counters {
@@ -45,6 +47,7 @@ impl std::ops::AddAssign for Counters {
         self.field_lookups += o.field_lookups;
         self.products += o.products;
         self.reweighted_products += o.reweighted_products;
+        self.extra_collisions += o.extra_collisions;
     }
 }
 
@@ -89,6 +92,8 @@ pub struct RenderStats {
     pub products_per_path: f64,
     /// Reweighted (approximate) products with the phase function per path.
     pub reweighted_products_per_path: f64,
+    /// Extra collisions for delta lights per path.
+    pub extra_collisions_per_path: f64,
 }
 
 /// The training part of `--stats`.
@@ -133,6 +138,7 @@ impl RenderStats {
             field_lookups_per_path: per_path(c.field_lookups),
             products_per_path: per_path(c.products),
             reweighted_products_per_path: per_path(c.reweighted_products),
+            extra_collisions_per_path: per_path(c.extra_collisions),
         }
     }
 }

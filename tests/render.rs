@@ -51,7 +51,38 @@ angular_diameter = 2
 
 #[test]
 fn image_does_not_depend_on_thread_count() {
+    // The homogeneous twin exercises guided flights' extra collisions for the spot light,
+    // placed by a grid built from every tile's records.
+    let homogeneous = SMALL
+        .replace("type = \"noise\"", "type = \"homogeneous\"")
+        .replace("scale = 8\n", "")
+        .replace(
+            "transform = [{ translate = [-0.5, -0.5, -0.5] }, { translate = [0, 0.6, 0] }]\n",
+            "",
+        );
+    assert!(!homogeneous.contains("noise") && !homogeneous.contains("[-0.5, -0.5, -0.5]"));
+    assert_eq!(same_image_with_1_and_2_threads(SMALL), 0);
+    assert!(same_image_with_1_and_2_threads(&homogeneous) > 0);
     let s = scene(SMALL);
+    let a = render(
+        &s,
+        &RenderOptions { threads: Some(1), ..RenderOptions::unguided(Budget::Samples(4), 9) },
+        &|_, _| true,
+    )
+    .unwrap();
+    let c = render(
+        &s,
+        &RenderOptions { threads: Some(2), ..RenderOptions::unguided(Budget::Samples(4), 10) },
+        &|_, _| true,
+    )
+    .unwrap();
+    assert_ne!(a.film.pixels(), c.film.pixels(), "the seed must matter");
+}
+
+/// Renders `text` unguided, guided and adaptively with 1 and 2 threads, and returns the extra
+/// collisions the guided render drew.
+fn same_image_with_1_and_2_threads(text: &str) -> u64 {
+    let s = scene(text);
     let run = |threads, guiding: Components, adaptive: bool| {
         let mut o = RenderOptions {
             threads: Some(threads),
@@ -62,10 +93,14 @@ fn image_does_not_depend_on_thread_count() {
         o.guiding.train = TrainBudget::Passes(3);
         render(&s, &o, &|_, _| true).unwrap()
     };
+    let mut extra = 0;
     for (guiding, adaptive) in
         [(Components::OFF, false), (Components::FULL, false), (Components::FULL, true)]
     {
         let (a, b) = (run(1, guiding, adaptive), run(2, guiding, adaptive));
+        if guiding == Components::FULL && !adaptive {
+            extra = a.counters.extra_collisions;
+        }
         assert_eq!(a.film.pixels(), b.film.pixels(), "1 and 2 threads differ ({guiding:?})");
         assert_eq!(a.counters, b.counters);
         // Adaptive guiding chooses its tiles by counted work, not by time.
@@ -74,14 +109,7 @@ fn image_does_not_depend_on_thread_count() {
         assert_eq!(tiles(&a), tiles(&b));
         assert_eq!(tiles(&a).is_some(), adaptive);
     }
-    let a = run(1, Components::OFF, false);
-    let c = render(
-        &s,
-        &RenderOptions { threads: Some(2), ..RenderOptions::unguided(Budget::Samples(4), 10) },
-        &|_, _| true,
-    )
-    .unwrap();
-    assert_ne!(a.film.pixels(), c.film.pixels(), "the seed must matter");
+    extra
 }
 
 #[test]

@@ -174,6 +174,7 @@ fn walk<C: RadianceCache>(
                 s.guided_gain *= f.gain;
                 delta_share = f.delta_share;
                 if let Some(extra) = f.extra {
+                    counters.extra_collisions += 1;
                     let p = s.ray.at(extra.t);
                     let (phase, dir) = (medium.phase, s.ray.direction);
                     let direct = sample_light(
