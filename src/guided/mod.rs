@@ -378,7 +378,10 @@ impl RadianceCache for FieldCache<'_> {
     #[inline]
     fn direct_along(&mut self, start: Vec3A, step: Vec3A, _w: Vec3A, _g: f32, out: &mut [f32]) {
         match self.direct {
-            Some(d) => d.grid.fluence_along(start, step, out),
+            Some(d) => {
+                d.grid.fluence_along(start, step, out);
+                out.iter_mut().for_each(|v| *v *= crate::math::INV_FOUR_PI);
+            }
             None => out.fill(0.0),
         }
     }

@@ -150,6 +150,20 @@ mod tests {
     }
 
     #[test]
+    fn a_caches_direct_light_along_a_ray_is_its_direct_light_at_each_part() {
+        use crate::guided::{FieldCache, RadianceCache};
+        let t = trained();
+        let mut cache = FieldCache::with_direct(&t.field, t.direct.as_ref(), false);
+        let (start, step, w) = (Vec3A::splat(-0.1), Vec3A::splat(0.07), Vec3A::X);
+        let mut along = [f32::NAN; 16];
+        cache.direct_along(start, step, w, 0.5, &mut along);
+        for (j, v) in along.iter().enumerate() {
+            assert_eq!(*v, cache.direct(start + (j as f32 + 0.5) * step, w, 0.5), "part {j}");
+        }
+        assert!(along.iter().any(|&v| v > 0.0) && along[0] == 0.0, "{along:?}");
+    }
+
+    #[test]
     fn round_trip_and_bare_fields() {
         let t = trained();
         let mut bytes = Vec::new();
