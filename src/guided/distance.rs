@@ -13,9 +13,8 @@
 //! segment the cache gives the conditional probability of colliding in it once the walk has
 //! reached it (the estimated radiance the segment sends back over the radiance entering it),
 //! and inside a segment the offset follows a truncated exponential of a proxy coefficient.
-//! Segments are evaluated
-//! lazily, only as far as the walk goes (the incremental CDF: no normalisation pass over the
-//! whole ray). The standard strategy uses the same segments with the exponential's own
+//! Segments are evaluated lazily, only as far as the walk goes (the incremental CDF: no
+//! normalisation pass over the whole ray). The standard strategy uses the same segments with the exponential's own
 //! probabilities, so the one-sample mixture `alpha p_guided + (1 - alpha) p_standard` has an
 //! exact density. The weights use the exact transmittance, so every channel stays unbiased.
 //! There, too, a flight may add an extra collision for next-event estimation of delta lights
@@ -82,6 +81,9 @@ const DIRECT_SEGMENTS: usize = 16;
 struct DirectStretch {
     weights: [f32; DIRECT_SEGMENTS],
     total: f32,
+    /// The length of a part, and per channel the probability of colliding within one.
+    length: f32,
+    collide: Spectrum,
 }
 
 /// Where a guided flight ended.
@@ -301,7 +303,7 @@ impl GuidedDistance {
             Some((t, k, g, s)) => {
                 let seg = self.segments[k];
                 let mix = self.alpha * g * seg.p_guided + (1.0 - self.alpha) * s * seg.p_std;
-                let density = mix * self.offset_pdf(&self.segments[k], t - seg.start);
+                let density = mix * self.offset_pdf(&seg, t - seg.start);
                 (Some(t), density, standard_share(s * seg.p_std, mix))
             }
             None => {
@@ -328,7 +330,7 @@ impl GuidedDistance {
             let seg = self.segments[k];
             let p = if guided { seg.p_guided } else { seg.p_std };
             if sampler.next_1d() < p {
-                return Some((seg.start + self.offset(&self.segments[k], sampler), k, g, s));
+                return Some((seg.start + self.offset(&seg, sampler), k, g, s));
             }
             g *= 1.0 - seg.p_guided;
             s *= 1.0 - seg.p_std;
@@ -336,7 +338,7 @@ impl GuidedDistance {
         None
     }
 
-    /// An offset inside segment `k`: a channel by its share of the segment's collisions, then
+    /// An offset inside `seg`: a channel by its share of the segment's collisions, then
     /// its truncated exponential, cut to stay inside the segment.
     fn offset(&self, seg: &Segment, sampler: &mut Sampler) -> f32 {
         let share = seg.mass * seg.collide;
@@ -361,12 +363,17 @@ impl GuidedDistance {
             return d;
         }
         let h = self.guided_end / DIRECT_SEGMENTS as f32;
-        let (collide, decay) = (self.part_collide(h), exp(-self.sigma * h));
+        let collide = Spectrum::select(
+            self.sigma.cmpgt(Spectrum::ZERO),
+            -exp_m1(-self.sigma * h),
+            Spectrum::ZERO,
+        );
+        let mut d =
+            DirectStretch { weights: [0.0; DIRECT_SEGMENTS], total: 0.0, length: h, collide };
+        let (decay, dir) = (exp(-self.sigma * h), self.ray.direction);
         let g = medium.phase.mean_cosine();
-        let mut d = DirectStretch { weights: [0.0; DIRECT_SEGMENTS], total: 0.0 };
-        let mut mass = self.pick;
-        let dir = self.ray.direction;
         cache.direct_along(self.ray.origin, dir * h, dir, g, &mut d.weights);
+        let mut mass = self.pick;
         for w in &mut d.weights {
             *w = positive_or_zero(mass.dot(collide) * *w);
             d.total += *w;
@@ -376,21 +383,15 @@ impl GuidedDistance {
         d
     }
 
-    /// Per channel, the probability of colliding within a part of length `h`.
-    fn part_collide(&self, h: f32) -> Spectrum {
-        Spectrum::select(self.sigma.cmpgt(Spectrum::ZERO), -exp_m1(-self.sigma * h), Spectrum::ZERO)
-    }
-
     /// Part `j` of the guided stretch as a segment (for its offsets and their density).
-    fn part(&self, j: usize) -> Segment {
-        let h = self.guided_end / DIRECT_SEGMENTS as f32;
-        let start = j as f32 * h;
+    fn part(&self, d: &DirectStretch, j: usize) -> Segment {
+        let start = j as f32 * d.length;
         let mass = Spectrum::select(
             self.pick.cmpgt(Spectrum::ZERO),
             self.pick * exp(-self.sigma * start),
             Spectrum::ZERO,
         );
-        Segment { start, length: h, mass, collide: self.part_collide(h), ..Default::default() }
+        Segment { start, length: d.length, mass, collide: d.collide, ..Default::default() }
     }
 
     /// Samples a collision for next-event estimation of delta lights: `(t, its density)`, the
@@ -417,7 +418,7 @@ impl GuidedDistance {
                 v < below
             })
             .or_else(|| (0..DIRECT_SEGMENTS).rev().find(|&j| d.weights[j] > 0.0))?;
-        let part = self.part(j);
+        let part = self.part(&d, j);
         let x = self.offset(&part, sampler);
         Some((part.start + x, d.weights[j] / d.total * self.offset_pdf(&part, x)))
     }
@@ -430,15 +431,14 @@ impl GuidedDistance {
         cache: &mut impl RadianceCache,
     ) -> f32 {
         let d = self.direct_weights(medium, cache);
-        let h = self.guided_end / DIRECT_SEGMENTS as f32;
         if !(d.total > 0.0 && d.total.is_finite() && t >= 0.0 && t < self.guided_end) {
             return 0.0;
         }
-        let j = ((t / h) as usize).min(DIRECT_SEGMENTS - 1);
+        let j = ((t / d.length) as usize).min(DIRECT_SEGMENTS - 1);
         if d.weights[j] == 0.0 {
             return 0.0;
         }
-        let part = self.part(j);
+        let part = self.part(&d, j);
         d.weights[j] / d.total * self.offset_pdf(&part, t - part.start)
     }
 
@@ -463,7 +463,7 @@ impl GuidedDistance {
             self.ensure(k, medium, cache, counters);
             let seg = self.segments[k];
             if t >= seg.start && (t < seg.start + seg.length || k + 1 == self.count) {
-                let offset = self.offset_pdf(&self.segments[k], t - seg.start);
+                let offset = self.offset_pdf(&seg, t - seg.start);
                 return (g * seg.p_guided * offset, s * seg.p_std * offset);
             }
             g *= 1.0 - seg.p_guided;
@@ -597,11 +597,11 @@ pub fn guided_flight(
             ..GuidedFlight::new(GuidedEvent::Scatter { t }, scattering(t) / pdf, gain)
         };
     }
-    let c = medium.coefficients(ray.at(t));
+    let x = ray.at(t);
+    let c = medium.coefficients(x);
     let w = transmittance_homogeneous(sigma_t, t) / pdf;
     let sigma_s = c.sigma_t * c.albedo;
     let sigma_a = (c.sigma_t - sigma_s).max(Spectrum::ZERO);
-    let x = ray.at(t);
     // Absorb or scatter, in proportion to what each brings back (the zero-variance choice):
     // emission sigma_a L_e against in-scattered sigma_s L_s.
     let emit = luminance(sigma_a * medium.emission);

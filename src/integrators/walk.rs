@@ -188,9 +188,8 @@ fn walk<C: RadianceCache>(
                         |wi| Spectrum::splat(phase.eval(dir, wi)),
                         |_| 0.0,
                     );
-                    let c = s.beta * extra.weight * direct.contribution;
-                    l += c;
-                    record_contribution(ctx, c);
+                    // No recorder is listening: extra collisions stay out of training.
+                    l += s.beta * extra.weight * direct.contribution;
                 }
                 match f.event {
                     GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted),
