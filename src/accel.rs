@@ -206,6 +206,77 @@ impl Bvh {
     }
 }
 
+/// What a shadow traversal found (see [`Bvh::shadow`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum ShadowTrace {
+    /// A blocking primitive lies within reach.
+    Blocked,
+    /// Nothing blocks; every other primitive's crossings within reach are in the list
+    /// (unsorted).
+    Clear,
+    /// Nothing blocking was met, but more crossings than the list holds: the caller must
+    /// trace step by step.
+    Overflow,
+}
+
+impl Bvh {
+    /// One traversal for a shadow ray: stops at the first primitive of a shape that `blocks`
+    /// within `(0, t_max)`, and otherwise collects every crossing of the others (null
+    /// surfaces; closed shapes are crossed twice). Tracing step by step takes a closest-hit
+    /// traversal per null surface crossed, twice the work where a room's walls stand behind
+    /// a medium's box.
+    #[inline]
+    pub(crate) fn shadow<const N: usize>(
+        &self,
+        shapes: &[Geometry],
+        ray: &Ray,
+        t_max: f32,
+        blocks: impl Fn(u32) -> bool,
+        crossings: &mut arrayvec::ArrayVec<BvhHit, N>,
+    ) -> ShadowTrace {
+        crossings.clear();
+        if self.nodes.is_empty() {
+            return ShadowTrace::Clear;
+        }
+        let inv_dir = ray.direction.recip();
+        let parallel = !inv_dir.is_finite();
+        let mut stack = arrayvec::ArrayVec::<u32, STACK>::new();
+        let mut current = 0usize;
+        let mut full = false;
+        loop {
+            let node = &self.nodes[current];
+            let hit = if parallel {
+                node.bounds.intersect(ray, inv_dir, 0.0, t_max).is_some()
+            } else {
+                hits_box(&node.bounds, ray.origin, inv_dir, t_max)
+            };
+            if hit {
+                if node.count == 0 {
+                    // Any order: a blocker anywhere ends the search, and every crossing counts.
+                    stack.push(node.offset);
+                    current += 1;
+                    continue;
+                }
+                let first = node.offset as usize;
+                for prim in &self.prims[first..first + node.count as usize] {
+                    let shape = &shapes[prim.shape as usize];
+                    let mut next = shape.intersect(prim.index, ray, t_max);
+                    while let Some(hit) = next {
+                        if blocks(prim.shape) {
+                            return ShadowTrace::Blocked;
+                        }
+                        full |= crossings.try_push(BvhHit { prim: *prim, hit }).is_err();
+                        next = shape.next_crossing(prim.index, ray, hit.t, t_max);
+                    }
+                }
+            }
+            let Some(next) = stack.pop() else { break };
+            current = next as usize;
+        }
+        if full { ShadowTrace::Overflow } else { ShadowTrace::Clear }
+    }
+}
+
 /// Whether the ray from `origin` meets `b` within `[0, t_max]`, for a finite reciprocal
 /// direction `inv_dir`: slab distances are then never NaN, so no masks are needed.
 #[inline]

@@ -11,7 +11,7 @@ pub mod desc;
 mod load;
 mod xml;
 
-use crate::accel::Bvh;
+use crate::accel::{Bvh, BvhHit, ShadowTrace};
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::lights::Light;
@@ -158,6 +158,15 @@ pub struct RenderSettings {
     pub seed: u64,
 }
 
+/// A null surface a shadow ray crosses: where, and the medium beyond it.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct Crossing {
+    /// Ray parameter of the crossing.
+    pub(crate) t: f32,
+    /// The medium the ray travels in after it.
+    pub(crate) medium: Option<u32>,
+}
+
 /// A compiled scene, ready to render.
 #[derive(Debug)]
 pub struct Scene {
@@ -293,6 +302,35 @@ impl Scene {
             ns = -ns;
         }
         Some(SurfaceHit { t: h.hit.t, p, ng, ns, uv, shape })
+    }
+
+    /// Traces a shadow ray to `t_max` in one traversal: [`ShadowTrace::Blocked`] if any
+    /// surface but a null one lies in the way; otherwise the null surfaces it crosses, sorted
+    /// along the ray, each with the medium the ray enters there.
+    pub(crate) fn trace_shadow<const N: usize>(
+        &self,
+        ray: &Ray,
+        t_max: f32,
+        crossings: &mut arrayvec::ArrayVec<Crossing, N>,
+    ) -> ShadowTrace {
+        crossings.clear();
+        let mut hits = arrayvec::ArrayVec::<BvhHit, N>::new();
+        let blocks = |shape: u32| self.surfaces[shape as usize].bsdf != Bsdf::Null;
+        let trace = self.bvh.shadow(&self.shapes, ray, t_max, blocks, &mut hits);
+        if trace == ShadowTrace::Clear {
+            hits.sort_unstable_by(|a, b| a.hit.t.total_cmp(&b.hit.t));
+            crossings.extend(hits.iter().map(|h| {
+                let shape = h.prim.shape as usize;
+                let (_, mut ng, _, _) = self.shapes[shape].surface(h.prim.index, ray, h.hit);
+                let s = &self.surfaces[shape];
+                if s.flip {
+                    ng = -ng;
+                }
+                let inward = ray.direction.dot(ng) < 0.0;
+                Crossing { t: h.hit.t, medium: if inward { s.interior } else { s.exterior } }
+            }));
+        }
+        trace
     }
 
     /// The medium a ray leaving `hit` along `dir` travels in.

@@ -70,6 +70,12 @@ impl Cuboid {
     /// `PrimHit::b.x`.
     #[inline]
     pub(super) fn intersect(&self, ray: &Ray, t_max: f32) -> Option<PrimHit> {
+        self.crossing(ray, 0.0, t_max)
+    }
+
+    /// The nearest crossing in `(t_min, t_max)`.
+    #[inline]
+    pub(super) fn crossing(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<PrimHit> {
         // The map is affine, so the local ray keeps the world ray's parameter.
         let o = self.to_world.inv_point(ray.origin);
         let inv_d = self.to_world.inv_vector(ray.direction).recip();
@@ -79,8 +85,8 @@ impl Cuboid {
         let (t_near, t_far) = (near.max_element(), far.min_element());
         // NaN (a ray parallel to a face and lying in its plane) fails every test: a miss.
         let (t, slabs, far_side) =
-            if t_near > 0.0 { (t_near, near, false) } else { (t_far, far, true) };
-        if t_near > t_far || t_near.is_nan() || t <= 0.0 || t >= t_max || t.is_nan() {
+            if t_near > t_min { (t_near, near, false) } else { (t_far, far, true) };
+        if t_near > t_far || t_near.is_nan() || t <= t_min || t >= t_max || t.is_nan() {
             return None;
         }
         let axis = if slabs.x == t {

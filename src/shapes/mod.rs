@@ -107,6 +107,17 @@ impl Geometry {
         }
     }
 
+    /// Where a ray that met primitive `i` at `t` meets it next, within `t_max`: closed shapes
+    /// (spheres, boxes) are crossed twice, flat primitives only once.
+    #[inline]
+    pub fn next_crossing(&self, _i: u32, ray: &Ray, t: f32, t_max: f32) -> Option<PrimHit> {
+        match self {
+            Geometry::Sphere(s) => s.crossing(ray, t, t_max),
+            Geometry::Cuboid(c) => c.crossing(ray, t, t_max),
+            Geometry::Disk(_) | Geometry::Parallelogram(_) | Geometry::Mesh(_) => None,
+        }
+    }
+
     /// Completes a hit into the full local geometry (without the shape index and flip).
     pub fn surface(&self, i: u32, ray: &Ray, hit: PrimHit) -> (Vec3A, Vec3A, Vec3A, Vec2) {
         match self {

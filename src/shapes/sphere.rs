@@ -44,6 +44,12 @@ impl Sphere {
 
     #[inline]
     pub(super) fn intersect(&self, ray: &Ray, t_max: f32) -> Option<PrimHit> {
+        self.crossing(ray, 0.0, t_max)
+    }
+
+    /// The nearest crossing in `(t_min, t_max)`.
+    #[inline]
+    pub(super) fn crossing(&self, ray: &Ray, t_min: f32, t_max: f32) -> Option<PrimHit> {
         let oc = ray.origin - self.center;
         let b = oc.dot(ray.direction);
         // The discriminant from the closest-approach vector loses no precision for rays that
@@ -62,8 +68,8 @@ impl Sphere {
         if t0 > t1 {
             std::mem::swap(&mut t0, &mut t1);
         }
-        let t = if t0 > 0.0 { t0 } else { t1 };
-        (t > 0.0 && t < t_max).then_some(PrimHit { t, b: Vec2::ZERO })
+        let t = if t0 > t_min { t0 } else { t1 };
+        (t > t_min && t < t_max).then_some(PrimHit { t, b: Vec2::ZERO })
     }
 
     pub(super) fn surface(&self, ray: &Ray, hit: PrimHit) -> (Vec3A, Vec3A, Vec3A, Vec2) {
