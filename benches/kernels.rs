@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3A};
 use std::hint::black_box;
 use std::path::Path;
 use std::time::Duration;
-use zerovar::guided::distance::GuidedDistance;
+use zerovar::guided::distance::{GuidedDistance, SEGMENTS};
 use zerovar::guided::{Components, FieldCache, NoCache, RadianceCache, TrainedField};
 use zerovar::integrators::walk::{WalkContext, WalkSettings, radiance};
 use zerovar::integrators::{VolPath, shadow_transmittance};
@@ -122,7 +122,8 @@ fn guided_distance(c: &mut Criterion) {
         b.iter(|| {
             let ray = camera_ray(&scene, &mut s);
             let t_max = scene.intersect(&ray, f32::INFINITY).map_or(50.0, |h| h.t);
-            let mut d = GuidedDistance::new(medium, &ray, t_max, Vec3A::ONE, 0.5, s.next_1d())?;
+            let (one, u) = (Vec3A::ONE, s.next_1d());
+            let mut d = GuidedDistance::new(medium, &ray, t_max, one, 0.5, u, SEGMENTS)?;
             Some(black_box(d.sample(medium, &mut cache, &mut s, &mut counters)))
         })
     });

@@ -7,7 +7,7 @@ use glam::{Vec2, Vec3A};
 use std::cell::RefCell;
 use zerovar::film::Film;
 use zerovar::guided::TrainedField;
-use zerovar::guided::distance::{GuidedDistance, GuidedEvent};
+use zerovar::guided::distance::{GuidedDistance, GuidedEvent, MAX_SEGMENTS};
 use zerovar::guided::{Components, NoCache, RadianceCache};
 use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
 use zerovar::math::{Ray, Spectrum};
@@ -101,12 +101,12 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
     for (text, t_max) in cases {
         let medium = medium_of(text);
         let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
-        for alpha in [0.3f32, 1.0] {
+        for (alpha, parts) in [(0.3f32, MAX_SEGMENTS), (1.0, MAX_SEGMENTS), (0.5, 1)] {
             let cache =
                 Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), ..Analytic::constant(1.0) };
+            let pick = Vec3A::new(0.2, 0.5, 0.3);
             let state = RefCell::new((
-                GuidedDistance::new(&medium, &ray, t_max, Vec3A::new(0.2, 0.5, 0.3), alpha, 0.5)
-                    .unwrap(),
+                GuidedDistance::new(&medium, &ray, t_max, pick, alpha, 0.5, parts).unwrap(),
                 cache,
             ));
             let pdf = |t: f64| {
@@ -121,7 +121,7 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
             let total = integrate_1d(&pdf, 0.0, t_max as f64, 96) + pass;
             assert!(
                 (total - 1.0).abs() < 1e-4,
-                "{text}, alpha {alpha}: density integrates to {total}"
+                "{text}, alpha {alpha}, {parts} segments: density integrates to {total}"
             );
             let mut sampler = Sampler::new(5, 0, 0);
             let samples: Vec<f64> = (0..100_000)
@@ -135,12 +135,11 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
                 .collect();
             let edges: Vec<f64> = (0..=32).map(|i| t_max as f64 * i as f64 / 32.0).collect();
             chi2_1d(&samples, &pdf, &edges, &[(-1.0, pass)])
-                .assert_pass(1e-3, &format!("{text}, alpha {alpha}"));
+                .assert_pass(1e-3, &format!("{text}, alpha {alpha}, {parts} segments"));
             // The weight relative to standard sampling (what the walk bounds without weight
             // windows) is the standard density over the mixture's: the alpha-0 distribution's.
             let mut standard =
-                GuidedDistance::new(&medium, &ray, t_max, Vec3A::new(0.2, 0.5, 0.3), 0.0, 0.5)
-                    .unwrap();
+                GuidedDistance::new(&medium, &ray, t_max, pick, 0.0, 0.5, parts).unwrap();
             for _ in 0..200 {
                 let (d, c) = &mut *state.borrow_mut();
                 let counters = &mut Counters::default();
@@ -177,7 +176,7 @@ fn extra_collisions_follow_their_density_which_integrates_to_one() {
         let cache = Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), ..Analytic::constant(1.0) };
         let pick = Vec3A::new(0.2, 0.5, 0.3);
         let state = RefCell::new((
-            GuidedDistance::new(&medium, &ray, t_max, pick, 0.5, 0.5).unwrap(),
+            GuidedDistance::new(&medium, &ray, t_max, pick, 0.5, 0.5, MAX_SEGMENTS).unwrap(),
             cache,
         ));
         let pdf = |t: f64| {
