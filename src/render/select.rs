@@ -26,21 +26,19 @@ use std::time::Instant;
 /// Nanoseconds of one thread per counted operation: a non-negative least-squares fit (relative
 /// error) to the render times of the ten example and bench scenes, each unguided, fully guided
 /// and with each component alone (50 renders, 1 thread, 8 spp after 4 training passes;
-/// `tools/fit-cost-model.py`). The fit's rms error is 12% (worst 34%); it predicts each
-/// scene's cost of a fully guided sample relative to an unguided one within 30%.
-const NS_PER_PATH: f64 = 142.0;
-const NS_PER_SEGMENT: f64 = 85.0;
-const NS_PER_SCATTER: f64 = 121.0;
+/// `tools/fit-cost-model.py`, refitted after shadow rays took one traversal and flights one
+/// segment). The fit's rms error is 10% (worst 23%); it predicts each scene's cost of a fully
+/// guided sample relative to an unguided one within 25%.
+const NS_PER_PATH: f64 = 35.0;
+const NS_PER_SEGMENT: f64 = 96.0;
+const NS_PER_SCATTER: f64 = 61.0;
 const NS_PER_DENSITY_LOOKUP: f64 = 114.0;
-const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 74.0;
-const NS_PER_FIELD_LOOKUP: f64 = 151.0;
-const NS_PER_PRODUCT: f64 = 344.0;
-const NS_PER_REWEIGHTED_PRODUCT: f64 = 315.0;
-/// Not in that fit (extra collisions came later): 2-thread render time with and without them
-/// over their count, 16 spp after 5 training passes, three runs each: light shaft 740 ns
-/// (1.51 per path), occluded light 520 ns (4.34 per path). It includes the flights whose
-/// parts were weighed but drew none.
-const NS_PER_EXTRA_COLLISION: f64 = 600.0;
+const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 83.0;
+const NS_PER_FIELD_LOOKUP: f64 = 161.0;
+const NS_PER_PRODUCT: f64 = 288.0;
+const NS_PER_REWEIGHTED_PRODUCT: f64 = 191.0;
+/// Extra collisions for delta lights, with the flights whose parts were weighed but drew none.
+const NS_PER_EXTRA_COLLISION: f64 = 433.0;
 
 /// What the pilot of adaptive guiding decided.
 #[derive(Clone, Debug, Serialize)]
