@@ -170,12 +170,7 @@ impl Bvh {
         let mut best: Option<BvhHit> = None;
         loop {
             let node = &self.nodes[current];
-            let hit = if parallel {
-                node.bounds.intersect(ray, inv_dir, 0.0, t_max).is_some()
-            } else {
-                hits_box(&node.bounds, ray.origin, inv_dir, t_max)
-            };
-            if hit {
+            if enters(&node.bounds, ray, inv_dir, parallel, t_max) {
                 if node.count > 0 {
                     let first = node.offset as usize;
                     for prim in &self.prims[first..first + node.count as usize] {
@@ -245,12 +240,7 @@ impl Bvh {
         let mut full = false;
         loop {
             let node = &self.nodes[current];
-            let hit = if parallel {
-                node.bounds.intersect(ray, inv_dir, 0.0, t_max).is_some()
-            } else {
-                hits_box(&node.bounds, ray.origin, inv_dir, t_max)
-            };
-            if hit {
+            if enters(&node.bounds, ray, inv_dir, parallel, t_max) {
                 if node.count == 0 {
                     // Any order: a blocker anywhere ends the search, and every crossing counts.
                     stack.push(node.offset);
@@ -274,6 +264,17 @@ impl Bvh {
             current = next as usize;
         }
         if full { ShadowTrace::Overflow } else { ShadowTrace::Clear }
+    }
+}
+
+/// Whether a traversal enters `b`: the NaN-safe box test for a ray `parallel` to an axis,
+/// the short one otherwise (see [`Bvh::intersect`]).
+#[inline]
+fn enters(b: &Aabb, ray: &Ray, inv_dir: Vec3A, parallel: bool, t_max: f32) -> bool {
+    if parallel {
+        b.intersect(ray, inv_dir, 0.0, t_max).is_some()
+    } else {
+        hits_box(b, ray.origin, inv_dir, t_max)
     }
 }
 
