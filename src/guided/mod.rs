@@ -346,8 +346,8 @@ impl RadianceCache for FieldCache<'_> {
     }
     #[inline]
     fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<Estimates> {
-        // Straight from the region, without loading its mixture: a ray's segments mostly
-        // fall in one region, so the last answer is kept too.
+        // Straight from the region, without loading its mixture: a heterogeneous flight's
+        // refreshes mostly fall in one region, so the last answer is kept too.
         let i = self.field.lookup_index(x.into(), u)?;
         if let Some((j, v, gm, e)) = self.memo
             && j == i
