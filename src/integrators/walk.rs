@@ -169,7 +169,7 @@ fn walk<C: RadianceCache>(
             let (scatter_t, weight, emitted) = if guide.distances && alpha > 0.0 {
                 // Extra collisions serve the image, not the field's training (where they cost
                 // 30% more time); one past the last depth would not estimate any light.
-                let extra_nee = scene.has_delta_lights
+                let extra_nee = !scene.delta_lights.is_empty()
                     && ctx.recorder.is_none()
                     && settings.max_depth.is_none_or(|d| s.depth + 1 < d);
                 let f = guided_flight(
@@ -511,16 +511,22 @@ fn sample_light(
     f: impl Fn(Vec3A) -> Spectrum,
     pdf: impl Fn(Vec3A) -> f32,
 ) -> DirectSample {
-    let n = scene.lights.len();
     let pick = sampler.next_1d();
     let u = sampler.next_2d();
+    // An extra collision picks among delta lights alone: picking among all, it would waste
+    // its shadow ray and its parts' lookups whenever it drew another light.
+    let n = match lights {
+        NeeLights::All { .. } => scene.lights.len(),
+        NeeLights::Delta => scene.delta_lights.len(),
+    };
     if n == 0 {
         return DirectSample::NONE;
     }
-    let light = &scene.lights[((pick * n as f32) as usize).min(n - 1)];
-    if lights == NeeLights::Delta && !light.is_delta() {
-        return DirectSample::NONE;
-    }
+    let k = ((pick * n as f32) as usize).min(n - 1);
+    let light = match lights {
+        NeeLights::All { .. } => &scene.lights[k],
+        NeeLights::Delta => &scene.lights[scene.delta_lights[k] as usize],
+    };
     let Some(ls) = light.sample(&scene.shapes, p, u) else { return DirectSample::NONE };
     let f = f(ls.wi);
     if f.max_element() <= 0.0 {
@@ -565,7 +571,8 @@ enum NeeLights {
     /// All lights, delta ones weighted by `delta_share` (their MIS weight against a guided
     /// flight's extra collision; 1 when there is none).
     All { delta_share: f32 },
-    /// Delta lights alone, unweighted (an extra collision, which carries its MIS weight).
+    /// Delta lights alone, one picked uniformly among them, unweighted (an extra collision,
+    /// which carries its MIS weight).
     Delta,
 }
 

@@ -224,7 +224,8 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
     }
     let infinite_lights =
         lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
-    let has_delta_lights = lights.iter().any(Light::is_delta);
+    let delta_lights =
+        lights.iter().enumerate().filter(|(_, l)| l.is_delta()).map(|(i, _)| i as u32).collect();
     let trackers = media.iter().map(Tracker::for_medium).collect();
     let bvh = Bvh::build(&shapes);
     Ok(Scene {
@@ -236,7 +237,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
         trackers,
         lights,
         infinite_lights,
-        has_delta_lights,
+        delta_lights,
         camera,
         camera_medium,
         global_medium,

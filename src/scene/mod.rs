@@ -186,8 +186,8 @@ pub struct Scene {
     pub(crate) lights: Vec<Light>,
     /// Indices of lights at infinity.
     pub(crate) infinite_lights: Vec<u32>,
-    /// Whether any light is a delta light (guided flights then draw extra collisions for them).
-    pub(crate) has_delta_lights: bool,
+    /// Indices of delta lights (guided flights draw extra collisions for them).
+    pub(crate) delta_lights: Vec<u32>,
     /// The camera.
     pub(crate) camera: Camera,
     /// The medium around the camera.
