@@ -27,7 +27,7 @@ use crate::rng::Sampler;
 use crate::stats::Counters;
 use crate::tracking::{MediumRay, TrackedRay, transmittance_homogeneous};
 
-/// Equal segments of the guided stretch in rendering: one, so a flight costs one cache
+/// Equal segments of the guided stretch in guided flights: one, so a flight costs one cache
 /// lookup. Finer segments follow the in-scattered light along the ray more closely, but the
 /// regions are coarser than the segments and extra collisions already follow delta lights
 /// in 16 parts (light shaft, `compare --time 20`, seeds 1 / 2: 4 segments 0.0067 / 0.0066,
@@ -154,7 +154,7 @@ impl GuidedDistance {
     /// the ray cannot collide (empty medium) or the medium is heterogeneous.
     /// `alpha` is the probability of the guided strategy; `lookup_u` drives the cache's
     /// spatial filter for every lookup of this ray; the guided stretch is cut into `parts`
-    /// equal segments ([`SEGMENTS`] in rendering).
+    /// equal segments ([`SEGMENTS`] in guided flights).
     ///
     /// # Panics
     /// If `parts` is not within 1 to [`MAX_SEGMENTS`].
