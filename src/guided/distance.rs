@@ -14,11 +14,12 @@
 //! reached it (the estimated radiance the segment sends back over the radiance entering it),
 //! and inside a segment the offset follows a truncated exponential of a proxy coefficient.
 //! Segments are evaluated lazily, only as far as the walk goes (the incremental CDF: no
-//! normalisation pass over the whole ray). The standard strategy uses the same segments with the exponential's own
-//! probabilities, so the one-sample mixture `alpha p_guided + (1 - alpha) p_standard` has an
-//! exact density. The weights use the exact transmittance, so every channel stays unbiased.
-//! There, too, a flight may add an extra collision for next-event estimation of delta lights
-//! (see [`guided_flight`]).
+//! normalisation pass over the whole ray); guided flights use one ([`SEGMENTS`]). The
+//! standard strategy uses the same segments with the exponential's own probabilities, so the
+//! one-sample mixture `alpha p_guided + (1 - alpha) p_standard` has an exact density. The
+//! weights use the exact transmittance, so every channel stays unbiased. There, too, a flight
+//! may add an extra collision for next-event estimation of delta lights (see
+//! [`guided_flight`]).
 
 use super::RadianceCache;
 use crate::math::{Ray, Spectrum, luminance, positive};

@@ -628,27 +628,32 @@ pub fn shadow_transmittance(
             // The shadow ray's end closes the last part.
             let end = Crossing { t: distance, medium: None };
             for &Crossing { t: end, medium: next } in crossings.iter().chain([&end]) {
-                if let Some(m) = medium {
-                    let (mi, tracker) = (m as usize, scene.trackers[m as usize]);
-                    let part = Ray::new(ray.at(start), ray.direction);
-                    let seg = end - start;
-                    tr *= transmittance_tracked(
-                        &scene.media[mi],
-                        tracker,
-                        &part,
-                        seg,
-                        sampler,
-                        counters,
-                    );
-                    if tr.max_element() <= 0.0 {
-                        return Spectrum::ZERO;
-                    }
+                let part = Ray::new(ray.at(start), ray.direction);
+                tr *= part_transmittance(scene, medium, &part, end - start, sampler, counters);
+                if tr.max_element() <= 0.0 {
+                    return Spectrum::ZERO;
                 }
                 (start, medium) = (end, next);
             }
             tr
         }
     }
+}
+
+/// The transmittance of `length` of `ray` inside `medium` (one where there is none), by the
+/// medium's tracker.
+fn part_transmittance(
+    scene: &Scene,
+    medium: Option<u32>,
+    ray: &Ray,
+    length: f32,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> Spectrum {
+    medium.map_or(Spectrum::ONE, |m| {
+        let (medium, tracker) = (&scene.media[m as usize], scene.trackers[m as usize]);
+        transmittance_tracked(medium, tracker, ray, length, sampler, counters)
+    })
 }
 
 /// [`shadow_transmittance`] one null surface at a time, for rays crossing more of them than
@@ -665,12 +670,9 @@ fn shadow_steps(
     for _ in 0..MAX_NULL_CROSSINGS {
         let hit = scene.intersect(&ray, distance);
         let seg = hit.as_ref().map_or(distance, |h| h.t);
-        if let Some(m) = medium {
-            let (mi, tracker) = (m as usize, scene.trackers[m as usize]);
-            tr *= transmittance_tracked(&scene.media[mi], tracker, &ray, seg, sampler, counters);
-            if tr.max_element() <= 0.0 {
-                return Spectrum::ZERO;
-            }
+        tr *= part_transmittance(scene, medium, &ray, seg, sampler, counters);
+        if tr.max_element() <= 0.0 {
+            return Spectrum::ZERO;
         }
         let Some(hit) = hit else { return tr };
         if scene.surfaces[hit.shape as usize].bsdf != Bsdf::Null {
