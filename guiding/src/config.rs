@@ -60,6 +60,10 @@ pub struct FieldConfig {
     pub filter_radius: f32,
     /// Which samples the field learns from (default all).
     pub samples: SampleKind,
+    /// Parallax-aware lobes (Ruppert et al. 2020; default on): each lobe learns how far its
+    /// light comes from, and lookups re-aim it from the region's centre to the query point,
+    /// so a region resolves a nearby source seen at different angles across it.
+    pub parallax: bool,
 }
 
 impl Default for FieldConfig {
@@ -83,6 +87,7 @@ impl Default for FieldConfig {
             filter_neighbours: 4,
             filter_radius: 1.5,
             samples: SampleKind::All,
+            parallax: true,
         }
     }
 }

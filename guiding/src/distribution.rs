@@ -52,7 +52,7 @@ pub enum ProductKind {
 /// ```
 #[derive(Clone, Debug)]
 pub struct VolumeDistribution {
-    base: LobeSet<{ MAX_LOBES / LANES }>,
+    pub(crate) base: LobeSet<{ MAX_LOBES / LANES }>,
     /// Each base lobe's mean cosine (reweighting's convolutions need them).
     base_mean_cosine: [[f32; LANES]; MAX_LOBES / LANES],
     product: LobeSet<{ MAX_PRODUCT_LOBES / LANES }>,
@@ -85,6 +85,9 @@ impl VolumeDistribution {
             Some(index) => {
                 let region = &field.regions()[index];
                 self.load_lanes(&region.lanes);
+                if region.lanes.parallax {
+                    self.base.shift_means(&region.lanes.inv_distance, region.lanes.centre - pos);
+                }
                 self.fluence = region.fluence();
                 self.region = Some(index as u32);
                 true
@@ -263,7 +266,7 @@ mod tests {
 
     fn with_mixture(m: &Mixture, fluence: f32) -> VolumeDistribution {
         let mut d = VolumeDistribution::default();
-        d.load_lanes(&RegionLanes::new(m));
+        d.load_lanes(&RegionLanes::new(m, &[0.0; crate::mixture::MAX_LOBES], Vec3::ZERO));
         d.fluence = fluence;
         d
     }
@@ -338,6 +341,46 @@ mod tests {
                 let what = format!("weights: kappa {kappa} g {g}");
                 assert_normalised_and_sampled(&d, &mut rng, 30_000, 2e-4, &what);
             }
+        }
+    }
+
+    #[test]
+    fn re_aimed_lobes_stay_normalised_and_sampling_matches_pdf() {
+        // Parallax-aware lobes re-aimed for a query point away from the region's centre: one
+        // lobe's source is 1.5 away, the other at infinity, and the sharp lobe's source sits
+        // at the query point itself (it must keep its mean, not become NaN).
+        let mut rng = Pcg32::new(5, 8);
+        let m = Mixture::new(&[
+            VmfLobe { mean: Vec3::new(0.2, 0.1, 1.0).normalize(), kappa: 30.0, weight: 0.5 },
+            VmfLobe { mean: Vec3::new(-1.0, 0.3, 0.0).normalize(), kappa: 4.0, weight: 0.3 },
+            VmfLobe { mean: Vec3::X, kappa: 1e4, weight: 0.2 },
+        ])
+        .unwrap();
+        let mut inv = [0.0; MAX_LOBES];
+        (inv[0], inv[1], inv[2]) = (1.0 / 1.5, 0.0, 1.0 / 0.8);
+        let lanes = RegionLanes::new(&m, &inv, Vec3::ZERO);
+        assert!(lanes.parallax);
+        // From the centre, the query point lies 0.8 along +x: at the third lobe's source.
+        let offset = Vec3::new(-0.8, 0.0, 0.0);
+        for product in [false, true] {
+            let mut d = VolumeDistribution::default();
+            d.load_lanes(&lanes);
+            d.fluence = 1.0;
+            d.base.shift_means(&lanes.inv_distance, offset);
+            let want = (m.lobes()[0].mean * 1.5 + offset).normalize();
+            assert!((d.base.lobe(0).0 - want).length() < 1e-6, "{:?}", d.base.lobe(0));
+            assert_eq!(d.base.lobe(1).0, m.lobes()[1].mean);
+            assert_eq!(d.base.lobe(2).0, Vec3::X);
+            let probe = Vec3::new(0.3, -0.2, 0.9).normalize();
+            let direct = lanes.lobes.pdf_shifted(probe, &lanes.inv_distance, offset);
+            assert!((direct - d.pdf(probe)).abs() <= 1e-6 * direct, "{direct} {}", d.pdf(probe));
+            if product {
+                d.apply_hg_product(RAY, 0.8);
+            } else {
+                d.apply_hg_weights(RAY, 0.4);
+            }
+            let what = format!("re-aimed, exact product {product}");
+            assert_normalised_and_sampled(&d, &mut rng, 30_000, 2e-4, &what);
         }
     }
 

@@ -29,6 +29,9 @@ pub(crate) struct WeightedDir {
     pub(crate) weight: f64,
     /// The density the direction was sampled with (used by split and merge).
     pub(crate) pdf: f32,
+    /// One over the distance from the region's pivot to where the light came from (0 for
+    /// light from infinitely far, or without parallax).
+    pub(crate) inv_distance: f32,
 }
 
 /// Settings of the EM (a subset of `FieldConfig`).
@@ -48,6 +51,8 @@ pub(crate) struct EmSettings {
 pub(crate) struct EmStats {
     weight: [f64; MAX_LOBES],
     moment: [DVec3; MAX_LOBES],
+    /// Per lobe, the sum of weight times responsibility times inverse source distance.
+    inv_distance: [f64; MAX_LOBES],
     /// Sum of sample weights (all samples, so total / count estimates the fluence).
     pub(crate) total_weight: f64,
     /// Number of samples, zero-weight ones included.
@@ -63,6 +68,7 @@ impl Default for EmStats {
         Self {
             weight: [0.0; MAX_LOBES],
             moment: [DVec3::ZERO; MAX_LOBES],
+            inv_distance: [0.0; MAX_LOBES],
             total_weight: 0.0,
             count: 0.0,
             positive_count: 0.0,
@@ -78,6 +84,8 @@ impl EmStats {
         let half = 0.5 * self.moment[k].length();
         self.weight[k] *= 0.5;
         self.weight[new] = self.weight[k];
+        self.inv_distance[k] *= 0.5;
+        self.inv_distance[new] = self.inv_distance[k];
         self.moment[k] = a * half;
         self.moment[new] = b * half;
     }
@@ -86,16 +94,29 @@ impl EmStats {
     pub(crate) fn merge_lobes(&mut self, i: usize, j: usize, last: usize) {
         self.weight[i] += self.weight[j];
         self.moment[i] += self.moment[j];
+        self.inv_distance[i] += self.inv_distance[j];
         self.weight[j] = self.weight[last];
         self.moment[j] = self.moment[last];
+        self.inv_distance[j] = self.inv_distance[last];
         self.weight[last] = 0.0;
         self.moment[last] = DVec3::ZERO;
+        self.inv_distance[last] = 0.0;
+    }
+
+    /// Each lobe's weighted mean inverse source distance (the reciprocal of a weighted
+    /// harmonic mean distance; 0 for a lobe of light from infinitely far or without data).
+    pub(crate) fn lobe_inverse_distances(&self) -> [f32; MAX_LOBES] {
+        std::array::from_fn(|k| {
+            let w = self.weight[k];
+            if w > 0.0 { (self.inv_distance[k] / w) as f32 } else { 0.0 }
+        })
     }
 
     /// Scales every statistic by `f`, used when a region splits in two.
     pub(crate) fn scale(&mut self, f: f64) {
         self.weight.iter_mut().for_each(|w| *w *= f);
         self.moment.iter_mut().for_each(|m| *m *= f);
+        self.inv_distance.iter_mut().for_each(|d| *d *= f);
         self.total_weight *= f;
         self.count *= f;
         self.positive_count *= f;
@@ -188,6 +209,7 @@ fn e_step(mixture: &Mixture, samples: &[WeightedDir]) -> EmStats {
             let wg = s.weight * f64::from(g);
             stats.weight[k] += wg;
             stats.moment[k] += d * wg;
+            stats.inv_distance[k] += wg * f64::from(s.inv_distance);
         }
     }
     stats
@@ -271,6 +293,7 @@ fn combine(a: &EmStats, b: &EmStats) -> EmStats {
     for k in 0..MAX_LOBES {
         c.weight[k] += b.weight[k];
         c.moment[k] += b.moment[k];
+        c.inv_distance[k] += b.inv_distance[k];
     }
     c.total_weight += b.total_weight;
     c.count += b.count;
@@ -322,7 +345,12 @@ pub(crate) mod tests {
                 let dir =
                     if u01(&mut rng) < 0.5 { t.sample(u) } else { vmf::sample(Vec3::Z, 0.0, u) };
                 let pdf = 0.5 * f64::from(t.pdf(dir)) + 0.5 / (4.0 * std::f64::consts::PI);
-                WeightedDir { dir, weight: scale * f64::from(t.pdf(dir)) / pdf, pdf: pdf as f32 }
+                WeightedDir {
+                    dir,
+                    weight: scale * f64::from(t.pdf(dir)) / pdf,
+                    pdf: pdf as f32,
+                    inv_distance: 0.0,
+                }
             })
             .collect()
     }
@@ -430,7 +458,9 @@ pub(crate) mod tests {
         let cfg = settings(8);
         // All samples in one direction: one lobe collapses onto it, up to max_kappa.
         let dir = Vec3::new(0.6, 0.0, 0.8);
-        let same: Vec<_> = (0..1000).map(|_| WeightedDir { dir, weight: 2.0, pdf: 1.0 }).collect();
+        let same: Vec<_> = (0..1000)
+            .map(|_| WeightedDir { dir, weight: 2.0, pdf: 1.0, inv_distance: 0.0 })
+            .collect();
         let mut m = initial_mixture(8, 2.0);
         let mut s = EmStats::default();
         update(&mut m, &mut s, &same, &cfg);
@@ -443,6 +473,7 @@ pub(crate) mod tests {
                 dir: if i % 2 == 0 { Vec3::X } else { Vec3::Y },
                 weight: 0.0,
                 pdf: 1.0,
+                inv_distance: 0.0,
             })
             .collect();
         let mut m0 = initial_mixture(8, 2.0);

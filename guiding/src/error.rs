@@ -26,7 +26,10 @@ pub enum GuidingError {
     #[error("not a zerovar guiding field (bad magic bytes)")]
     BadMagic,
     /// The saved field was written by another format version.
-    #[error("guiding field format version {found} is not supported (expected {expected})")]
+    #[error(
+        "guiding field format version {found} is not supported (this build reads {expected}); \
+         train the field again"
+    )]
     Version {
         /// The version in the file.
         found: u32,

@@ -10,7 +10,7 @@
 use crate::GuidingError;
 use crate::config::{FieldConfig, MAX_NEIGHBOURS, SampleKind};
 use crate::em::{self, EmSettings, EmStats, WeightedDir};
-use crate::mixture::Mixture;
+use crate::mixture::{MAX_LOBES, Mixture};
 use crate::product::RegionLanes;
 use crate::sample::{Sample, validate_all};
 use crate::splitmerge;
@@ -25,6 +25,9 @@ use std::time::Instant;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Region {
     pub(crate) mixture: Mixture,
+    /// Per lobe, one over the (harmonic mean) distance from `centre` to its light; 0 for
+    /// light from infinitely far. Lookups re-aim lobes from `centre` to the query point.
+    pub(crate) inv_distance: [f32; MAX_LOBES],
     fluence: f32,
     pub(crate) em: EmStats,
     pub(crate) split_merge: splitmerge::LobeStats,
@@ -44,8 +47,9 @@ impl Region {
     fn new(config: &FieldConfig) -> Self {
         let mixture = em::initial_mixture(config.initial_lobes, config.initial_kappa);
         Self {
-            lanes: RegionLanes::new(&mixture),
+            lanes: RegionLanes::new(&mixture, &[0.0; MAX_LOBES], Vec3::ZERO),
             mixture,
+            inv_distance: [0.0; MAX_LOBES],
             fluence: 0.0,
             em: EmStats::default(),
             split_merge: splitmerge::LobeStats::default(),
@@ -63,11 +67,22 @@ impl Region {
         &self.mixture
     }
 
-    /// The mixture's density `V_L(dir)`, as `mixture().pdf(dir)` but from the region's lane
-    /// blocks (faster; equal to within rounding).
+    /// The mixture's density `V_L(dir)` as fitted, seen from the region's centre: as
+    /// `mixture().pdf(dir)` but from the region's lane blocks (faster; equal to within
+    /// rounding).
     #[inline]
     pub fn density(&self, dir: Vec3) -> f32 {
         self.lanes.lobes.pdf(dir)
+    }
+
+    /// The mixture's density `V_L(dir)` as seen from `pos`: with parallax-aware lobes
+    /// re-aimed from the region's centre to `pos` (as `VolumeDistribution::init` does).
+    #[inline]
+    pub fn density_at(&self, pos: Vec3, dir: Vec3) -> f32 {
+        if !self.lanes.parallax {
+            return self.lanes.lobes.pdf(dir);
+        }
+        self.lanes.lobes.pdf_shifted(dir, &self.lanes.inv_distance, self.lanes.centre - pos)
     }
 
     /// The fluence estimate `Phi(x)`: the mean of `radiance / pdf` over the region's samples,
@@ -89,6 +104,28 @@ impl Region {
     /// Depth of the region's leaf in the tree.
     pub fn depth(&self) -> u32 {
         self.depth
+    }
+
+    /// Checks what lookups compute with (a loaded field's regions come from a file).
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        let lobes_ok = self.mixture.lobes().iter().all(|l| {
+            l.mean.is_finite()
+                && (l.mean.length() - 1.0).abs() < 1e-3
+                && l.kappa.is_finite()
+                && l.kappa >= 0.0
+                && l.weight.is_finite()
+                && l.weight >= 0.0
+        });
+        if !lobes_ok {
+            return Err("a lobe with a non-unit mean or a bad concentration or weight".into());
+        }
+        if !self.inv_distance.iter().all(|d| d.is_finite() && *d >= 0.0) {
+            return Err(format!("lobe source distances {:?}", self.inv_distance));
+        }
+        if !(self.fluence.is_finite() && self.fluence >= 0.0 && self.centre.is_finite()) {
+            return Err(format!("fluence {} at centre {}", self.fluence, self.centre));
+        }
+        Ok(())
     }
 
     /// True once the region has seen a sample carrying light; untrained regions are not
@@ -130,7 +167,7 @@ impl Field {
         last_update_seconds: f64,
     ) -> Self {
         for r in &mut regions {
-            r.lanes = RegionLanes::new(&r.mixture);
+            r.lanes = RegionLanes::new(&r.mixture, &r.inv_distance, r.centre);
         }
         let trained_regions = regions.iter().filter(|r| r.is_trained()).count();
         let centres = regions.iter().map(|r| r.centre).collect();
@@ -239,25 +276,33 @@ impl Field {
             if list.is_empty() {
                 return;
             }
+            // The batch is already in the spatial statistics (`refine`): the centre is the
+            // pivot the lobes are fitted from and re-aimed from.
+            region.centre = region.spatial.mean().as_vec3();
+            region.spread = region.spatial.variance().element_sum().sqrt() as f32;
+            let near = PARALLAX_NEAREST * region.spread;
             let dirs: Vec<WeightedDir> = list
                 .iter()
                 .map(|&i| {
                     let s = &samples[i as usize];
-                    WeightedDir { dir: s.direction.normalize(), weight: s.weight(), pdf: s.pdf }
+                    let (dir, inv_distance) = if config.parallax {
+                        reproject(s, region.centre, near)
+                    } else {
+                        (s.direction.normalize(), 0.0)
+                    };
+                    WeightedDir { dir, weight: s.weight(), pdf: s.pdf, inv_distance }
                 })
                 .collect();
             em::update(&mut region.mixture, &mut region.em, &dirs, &settings);
             if config.split_merge {
                 splitmerge::update(region, &dirs, config);
             }
-            region.lanes = RegionLanes::new(&region.mixture);
+            region.inv_distance =
+                if config.parallax { region.em.lobe_inverse_distances() } else { [0.0; MAX_LOBES] };
+            region.lanes = RegionLanes::new(&region.mixture, &region.inv_distance, region.centre);
             let fluence =
                 if region.em.count > 0.0 { region.em.total_weight / region.em.count } else { 0.0 };
             region.fluence = fluence.min(f64::from(f32::MAX)) as f32;
-            if region.spatial.count > 0.0 {
-                region.centre = region.spatial.mean().as_vec3();
-                region.spread = region.spatial.variance().element_sum().sqrt() as f32;
-            }
         });
         self.trained_regions = self.regions.iter().filter(|r| r.is_trained()).count();
         self.centres = self.regions.iter().map(|r| r.centre).collect();
@@ -363,6 +408,29 @@ impl Field {
     pub fn stats(&self) -> FieldStats {
         FieldStats::of(self)
     }
+}
+
+/// A sample's light source nearer to it than this many times the spread of its region's
+/// samples is moved out to that distance along the sample's direction before the direction is
+/// re-aimed from the pivot: a source inside the region has no one direction from it, and
+/// this keeps re-aimed directions close to the observed ones (Open PGL clamps similarly).
+const PARALLAX_NEAREST: f32 = 3.0;
+
+/// A sample's direction seen from `pivot`, towards the point its light came from (moved at
+/// least `near` from the sample), and one over that point's distance from `pivot`; light
+/// from infinitely far keeps its direction.
+fn reproject(s: &Sample, pivot: Vec3, near: f32) -> (Vec3, f32) {
+    let dir = s.direction.normalize();
+    if !s.distance.is_finite() {
+        return (dir, 0.0);
+    }
+    let source = s.position + dir * s.distance.max(near);
+    let to = source - pivot;
+    let len = to.length();
+    if !(len > 0.0 && len.is_finite()) {
+        return (dir, 0.0);
+    }
+    (to / len, 1.0 / len)
 }
 
 #[cfg(test)]

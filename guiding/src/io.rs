@@ -16,7 +16,7 @@ use std::io::{Read, Write};
 pub const MAGIC: [u8; 8] = *b"ZVGUIDE\0";
 
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 1;
+pub const FORMAT_VERSION: u32 = 2;
 
 #[derive(Serialize, Deserialize)]
 struct FieldData {
@@ -67,6 +67,9 @@ impl Field {
             postcard::from_bytes(&bytes).map_err(|e| GuidingError::Decode(e.to_string()))?;
         data.config.validate().map_err(|e| GuidingError::Decode(e.to_string()))?;
         data.tree.validate(data.regions.len()).map_err(GuidingError::Decode)?;
+        for (i, r) in data.regions.iter().enumerate() {
+            r.validate().map_err(|e| GuidingError::Decode(format!("region {i}: {e}")))?;
+        }
         Ok(Field::from_parts(
             data.config,
             data.tree,

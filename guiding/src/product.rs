@@ -128,6 +128,27 @@ impl BlockProduct {
     }
 }
 
+/// A block's means re-aimed by `offset` times each lane's inverse source distance, unit length
+/// (a lane keeps its mean bit for bit when its light comes from infinitely far, and where the
+/// sum vanishes: the source at the query point). Written as
+/// whole-lane array operations, which the compiler vectorises.
+#[inline(always)]
+fn shifted(b: &Block, inv: &[f32; LANES], offset: Vec3) -> [[f32; LANES]; 3] {
+    let mut out = [[0.0; LANES]; 3];
+    for j in 0..LANES {
+        let x = b.x[j] + offset.x * inv[j];
+        let y = b.y[j] + offset.y * inv[j];
+        let z = b.z[j] + offset.z * inv[j];
+        let len2 = x * x + y * y + z * z;
+        let ok = len2 > 1e-12 && inv[j] > 0.0;
+        let inv_len = 1.0 / len2.max(1e-12).sqrt();
+        out[0][j] = if ok { x * inv_len } else { b.x[j] };
+        out[1][j] = if ok { y * inv_len } else { b.y[j] };
+        out[2][j] = if ok { z * inv_len } else { b.z[j] };
+    }
+    out
+}
+
 /// A fixed-capacity set of weighted vMF lobes: `B` blocks of [`LANES`] lobes.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) struct LobeSet<const B: usize> {
@@ -187,6 +208,40 @@ impl<const B: usize> LobeSet<B> {
         }
         self.len = n;
         self.clear_tail();
+    }
+
+    /// Re-aims each lobe at the point its light comes from as seen from a point `offset`
+    /// away from where the lobes were fitted: mean `m` becomes `normalize(m + offset
+    /// inv_distance)`, i.e. `normalize(m d + pivot - x)` for `offset = pivot - x`. Lobes of
+    /// light from infinitely far (inverse distance 0) keep their means, as does a lobe whose
+    /// source lies at the query point itself.
+    #[inline]
+    pub(crate) fn shift_means(&mut self, inv_distance: &[[f32; LANES]], offset: Vec3) {
+        let n = self.blocks_used();
+        for (b, inv) in self.blocks[..n].iter_mut().zip(inv_distance) {
+            [b.x, b.y, b.z] = shifted(b, inv, offset);
+        }
+    }
+
+    /// The density of the lobes as [`shift_means`](Self::shift_means) would leave them,
+    /// without changing the set.
+    #[inline]
+    pub(crate) fn pdf_shifted(
+        &self,
+        dir: Vec3,
+        inv_distance: &[[f32; LANES]],
+        offset: Vec3,
+    ) -> f32 {
+        let mut sum = [0.0f32; LANES];
+        for (b, inv) in self.blocks[..self.blocks_used()].iter().zip(inv_distance) {
+            let [x, y, z] = shifted(b, inv, offset);
+            for j in 0..LANES {
+                let (dx, dy, dz) = (x[j] - dir.x, y[j] - dir.y, z[j] - dir.z);
+                let e = -0.5 * b.kappa[j] * (dx * dx + dy * dy + dz * dz);
+                sum[j] += b.weighted_norm[j] * lanes::exp(e);
+            }
+        }
+        sum.iter().sum()
     }
 
     /// Copies `other`'s lobes (only the blocks in use).
@@ -388,10 +443,20 @@ impl<const B: usize> LobeSet<B> {
 pub(crate) struct RegionLanes {
     pub(crate) lobes: LobeSet<{ MAX_LOBES / LANES }>,
     pub(crate) mean_cosine: [[f32; LANES]; MAX_LOBES / LANES],
+    /// Each lobe's inverse source distance from the region's centre (0: infinitely far).
+    pub(crate) inv_distance: [[f32; LANES]; MAX_LOBES / LANES],
+    /// Whether any lobe has a finite source distance (else lookups skip re-aiming).
+    pub(crate) parallax: bool,
+    /// The point the lobes were fitted from (the region's centre), kept next to them.
+    pub(crate) centre: Vec3,
 }
 
 impl RegionLanes {
-    pub(crate) fn new(mixture: &crate::Mixture) -> Self {
+    pub(crate) fn new(
+        mixture: &crate::Mixture,
+        inv_distance: &[f32; MAX_LOBES],
+        centre: Vec3,
+    ) -> Self {
         let mut lobes = LobeSet::default();
         lobes.set_from(mixture);
         let mut mean_cosine = [[0.0; LANES]; MAX_LOBES / LANES];
@@ -400,7 +465,15 @@ impl RegionLanes {
                 m[j] = lanes::mean_cosine(b.kappa[j]);
             }
         }
-        Self { lobes, mean_cosine }
+        let n = mixture.len();
+        let inv: [[f32; LANES]; MAX_LOBES / LANES] = std::array::from_fn(|b| {
+            std::array::from_fn(|j| {
+                let k = b * LANES + j;
+                if k < n { inv_distance[k] } else { 0.0 }
+            })
+        });
+        let parallax = inv_distance[..n].iter().any(|&d| d > 0.0);
+        Self { lobes, mean_cosine, inv_distance: inv, parallax, centre }
     }
 }
 

@@ -25,8 +25,9 @@ pub struct Sample {
     pub radiance: f32,
     /// Density with which `direction` was sampled (finite, > 0).
     pub pdf: f32,
-    /// Distance to where the radiance came from (the next vertex), or infinity. Stored for
-    /// parallax-aware extensions; the fit does not use it.
+    /// Distance to where the radiance came from (the next vertex), or infinity for light
+    /// from infinitely far. Parallax-aware fitting (`FieldConfig::parallax`) re-aims the
+    /// direction from the region's centre towards that point.
     pub distance: f32,
     /// True when `position` is in a medium, false on a surface.
     pub volume: bool,

@@ -362,7 +362,7 @@ impl RadianceCache for FieldCache<'_> {
         // than its HG convolution per segment; the direct part, often sharply directional,
         // keeps its direction.
         let e = Estimates {
-            incident: region.fluence() * region.density(w.into()),
+            incident: region.fluence() * region.density_at(x.into(), w.into()),
             inscattered: region.fluence() * crate::math::INV_FOUR_PI
                 + direct_inscattered(fluence, axis, w, g),
         };

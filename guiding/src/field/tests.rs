@@ -318,6 +318,15 @@ fn loading_rejects_other_versions_and_garbage() {
     assert!(matches!(Field::load(&b"not a field at all"[..]), Err(GuidingError::BadMagic)));
     assert!(matches!(Field::load(&bytes[..bytes.len() - 3]), Err(GuidingError::Decode(_))));
     assert!(Field::load(bytes.as_slice()).is_ok());
+    // Well-formed data describing a region lookups cannot use.
+    let mut bad = field.clone();
+    bad.regions[0].inv_distance[1] = f32::NAN;
+    let mut bytes = Vec::new();
+    bad.save(&mut bytes).unwrap();
+    match Field::load(bytes.as_slice()) {
+        Err(GuidingError::Decode(e)) => assert!(e.contains("region 0"), "{e}"),
+        r => panic!("expected a decode error, got {r:?}"),
+    }
 }
 
 #[test]
@@ -345,4 +354,111 @@ fn spatial_filter_picks_nearby_trained_regions() {
     assert!(
         (0..10).all(|i| plain.lookup_index(pos, i as f32 / 10.0) == plain.lookup_index(pos, 0.0))
     );
+}
+
+/// A field of one region over the cube `[-0.5, 0.5]^3`, trained on a light at `light`.
+fn one_region_field(parallax: bool, light: Vec3) -> Field {
+    let config = FieldConfig { max_samples_per_leaf: 1 << 30, parallax, ..FieldConfig::default() };
+    let mut field = Field::new(config).unwrap();
+    let mut rng = Pcg32::new(21, 5);
+    for _ in 0..3 {
+        let batch: Vec<_> = (0..20_000)
+            .map(|_| {
+                let pos = Vec3::new(u01(&mut rng), u01(&mut rng), u01(&mut rng)) - Vec3::splat(0.5);
+                sample_at(&mut rng, pos, light)
+            })
+            .collect();
+        field.update(&batch).unwrap();
+    }
+    assert_eq!(field.regions().len(), 1);
+    field
+}
+
+/// The angle, in degrees, between `dir` and the mean of the heaviest lobe `d` holds.
+fn heaviest_lobe_error(d: &VolumeDistribution, dir: Vec3) -> f32 {
+    let (mean, _, _) =
+        (0..MAX_LOBES).map(|k| d.base.lobe(k)).max_by(|a, b| a.2.total_cmp(&b.2)).unwrap();
+    mean.dot(dir).clamp(-1.0, 1.0).acos().to_degrees()
+}
+
+#[test]
+fn parallax_aware_lobes_aim_at_a_nearby_light_from_anywhere_in_the_region() {
+    // A light 2 units above a region a unit wide: seen from its sides the light's direction
+    // differs from the centre's by 12.7 degrees, more than the light's own 8-degree cone.
+    let light = Vec3::new(0.0, 0.0, 2.0);
+    let plain = one_region_field(false, light);
+    let aware = one_region_field(true, light);
+    let mut d = VolumeDistribution::default();
+    for x in [Vec3::new(-0.45, 0.0, 0.0), Vec3::new(0.45, 0.0, 0.0), Vec3::new(0.0, 0.4, 0.3)] {
+        let to_light = (light - x).normalize();
+        assert!(d.init(&plain, x, 0.5));
+        let (plain_error, plain_pdf) = (heaviest_lobe_error(&d, to_light), d.pdf(to_light));
+        assert!(d.init(&aware, x, 0.5));
+        let (aware_error, aware_pdf) = (heaviest_lobe_error(&d, to_light), d.pdf(to_light));
+        assert!(aware_error < 3.0, "at {x}: the lobe misses the light by {aware_error} degrees");
+        assert!(plain_error > 8.0, "at {x}: without parallax {plain_error} degrees");
+        assert!(aware_pdf > 2.0 * plain_pdf, "at {x}: density {aware_pdf} vs {plain_pdf}");
+        // The region's own density agrees with the loaded distribution's.
+        let region = &aware.regions()[0];
+        let r = region.density_at(x, to_light);
+        assert!((r - aware_pdf).abs() <= 1e-5 * aware_pdf, "{r} vs {aware_pdf}");
+    }
+    // The light is 2 units from the centre, so the heaviest lobe learned about that distance.
+    let region = &aware.regions()[0];
+    let k = (0..region.mixture().len())
+        .max_by(|&a, &b| {
+            region.mixture().lobes()[a].weight.total_cmp(&region.mixture().lobes()[b].weight)
+        })
+        .unwrap();
+    let distance = 1.0 / region.inv_distance[k];
+    assert!((distance - 2.0).abs() < 0.2, "learned distance {distance}");
+}
+
+#[test]
+fn light_from_infinitely_far_is_not_re_aimed() {
+    // Samples without a source distance (escaped paths): lookups anywhere see one mixture.
+    let mut field =
+        Field::new(FieldConfig { max_samples_per_leaf: 1 << 30, ..FieldConfig::default() })
+            .unwrap();
+    let mut rng = Pcg32::new(4, 4);
+    let batch: Vec<_> = (0..20_000)
+        .map(|_| {
+            let pos = Vec3::new(u01(&mut rng), u01(&mut rng), u01(&mut rng));
+            Sample { distance: f32::INFINITY, ..sample_at(&mut rng, pos, Vec3::new(0.0, 0.0, 1e4)) }
+        })
+        .collect();
+    field.update(&batch).unwrap();
+    let region = &field.regions()[0];
+    assert!(region.inv_distance.iter().all(|&v| v == 0.0));
+    let (mut a, mut b) = (VolumeDistribution::default(), VolumeDistribution::default());
+    assert!(a.init(&field, Vec3::ZERO, 0.5) && b.init(&field, Vec3::ONE, 0.5));
+    for k in 0..MAX_LOBES {
+        assert_eq!(a.base.lobe(k), b.base.lobe(k));
+    }
+}
+
+#[test]
+fn reprojection_moves_sources_to_the_pivot_and_keeps_infinite_ones() {
+    let s = Sample {
+        position: Vec3::new(1.0, 0.0, 0.0),
+        direction: Vec3::Z,
+        radiance: 1.0,
+        pdf: 1.0,
+        distance: 3.0,
+        volume: true,
+    };
+    // The source (1, 0, 3) seen from the origin.
+    let (dir, inv) = reproject(&s, Vec3::ZERO, 0.0);
+    assert!((dir - Vec3::new(1.0, 0.0, 3.0).normalize()).length() < 1e-6, "{dir}");
+    assert!((inv - 1.0 / 10f32.sqrt()).abs() < 1e-6);
+    // A source nearer than `near` to its sample is moved out to it first: (1, 0, 5).
+    let (dir, inv) = reproject(&s, Vec3::ZERO, 5.0);
+    assert!((dir - Vec3::new(1.0, 0.0, 5.0).normalize()).length() < 1e-6, "{dir}");
+    assert!((inv - 1.0 / 26f32.sqrt()).abs() < 1e-6);
+    // Light from infinitely far keeps its direction and has no distance.
+    let far = Sample { distance: f32::INFINITY, ..s };
+    assert_eq!(reproject(&far, Vec3::new(7.0, 7.0, 7.0), 1.0), (Vec3::Z, 0.0));
+    // A source at the pivot itself has no direction from it: the sample keeps its own.
+    let at_pivot = Sample { distance: 3.0, ..s };
+    assert_eq!(reproject(&at_pivot, Vec3::new(1.0, 0.0, 3.0), 0.0), (Vec3::Z, 0.0));
 }
