@@ -59,8 +59,9 @@ impl Method {
     /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
     /// distances, rr, full or a +-list), `alpha`, `train-passes`, `train-time` (seconds),
     /// `tracker` (a `--tracker` name), `combine` (true, the default: training images join the
-    /// result by inverse variance; false discards them, as `--training-images`). `NAME` alone
-    /// means `base` unchanged.
+    /// result by inverse variance; false discards them, as `--training-images`), `parallax`
+    /// (on, the default, or off: the field's lobes fixed per region, as `--parallax off`).
+    /// `NAME` alone means `base` unchanged.
     pub fn parse(spec: &str, base: &RenderOptions) -> Result<Self, CompareError> {
         let err = |why: String| CompareError::Method { spec: spec.to_string(), why };
         let (name, rest) = spec.split_once('=').unwrap_or((spec, ""));
@@ -119,9 +120,16 @@ impl Method {
                         _ => return Err(err(format!("combine: `{value}` is not true or false"))),
                     };
                 }
+                "parallax" => {
+                    m.options.guiding.field.parallax = match value {
+                        "on" | "true" | "yes" | "1" => true,
+                        "off" | "false" | "no" | "0" => false,
+                        _ => return Err(err(format!("parallax: `{value}` is not on or off"))),
+                    };
+                }
                 _ => {
                     return Err(err(format!(
-                        "unknown option `{key}`; use guiding, alpha, train-passes, train-time, tracker or combine"
+                        "unknown option `{key}`; use guiding, alpha, train-passes, train-time, tracker, combine or parallax"
                     )));
                 }
             }
@@ -374,6 +382,9 @@ mod tests {
         let base = RenderOptions::unguided(Budget::Samples(4), 1);
         let m = Method::parse("g=guiding:full,alpha:0.7,train-passes:3,combine:false", &base)
             .expect("valid method");
+        assert!(m.options.guiding.field.parallax);
+        let flat = Method::parse("f=guiding:full,parallax:off", &base).expect("valid method");
+        assert!(!flat.options.guiding.field.parallax);
         assert_eq!(m.name, "g");
         assert!(m.options.guiding.components.any() && !m.options.guiding.combine_training);
         assert_eq!(m.options.guiding.alpha, 0.7);
@@ -383,6 +394,7 @@ mod tests {
         assert!(plain.options.guiding.combine_training && !plain.options.guiding.components.any());
         for (spec, says) in [
             ("g=combine:maybe", "combine: `maybe` is not true or false"),
+            ("g=parallax:some", "parallax: `some` is not on or off"),
             ("g=alpha:2", "alpha 2 must lie in [0, 1]"),
             ("g=speed:3", "unknown option `speed`"),
             ("g=guiding", "is not key:value"),

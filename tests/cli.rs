@@ -203,6 +203,22 @@ fn trains_a_field_and_renders_with_it() {
     let o = zerovar(&["train", s, "-o", field.to_str().unwrap(), "--train-passes", "3", "--quiet"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(field.is_file());
+    // The parallax setting is the field's, saved with it.
+    let flat = dir.join("train-flat.zvg");
+    let o = zerovar(&[
+        "train",
+        s,
+        "-o",
+        flat.to_str().unwrap(),
+        "--train-passes",
+        "2",
+        "--parallax",
+        "off",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let load = |p: &Path| zerovar::TrainedField::load(std::fs::File::open(p).unwrap()).unwrap();
+    assert!(load(&field).field.config().parallax && !load(&flat).field.config().parallax);
     let exr = dir.join("train.exr");
     let stats = dir.join("train.json");
     let (e, f, st) = (exr.to_str().unwrap(), field.to_str().unwrap(), stats.to_str().unwrap());
@@ -259,6 +275,9 @@ fn trains_a_field_and_renders_with_it() {
         (vec!["--guiding", "full", "--train-passes", "0"], "--train-passes 0"),
         // A field with nothing to guide would be loaded for nothing.
         (vec!["--guiding", "off", "--field", f], "--guiding off: rendering with --field"),
+        // A saved field keeps the lobes it was trained with.
+        (vec!["--field", f, "--parallax", "off"], "--parallax: a saved field keeps"),
+        (vec!["--guiding", "full", "--parallax", "sideways"], "invalid value 'sideways'"),
     ] {
         let o = zerovar(&[&["render", s, "-o", e, "--quiet"][..], &args].concat());
         assert!(!o.status.success() && stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));

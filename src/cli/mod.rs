@@ -81,8 +81,8 @@ struct CompareArgs {
     reference: PathBuf,
     #[command(flatten)]
     budget: BudgetArgs,
-    /// A method: NAME=key:value,... with keys guiding, alpha, train-passes, train-time, tracker
-    /// (repeatable) [default: unguided and guided=guiding:full].
+    /// A method: NAME=key:value,... with keys guiding, alpha, train-passes, train-time, tracker,
+    /// combine, parallax (repeatable) [default: unguided and guided=guiding:full].
     #[arg(long, value_name = "NAME=OPTIONS")]
     method: Vec<String>,
     /// Directory for the tables and images.
@@ -122,6 +122,20 @@ struct GuidingArgs {
     /// --time, the seconds training leaves unspent go to the render.
     #[arg(long, allow_negative_numbers = true)]
     train_time: Option<f64>,
+    /// Parallax-aware lobes: each learns how far its light comes from and is re-aimed at it
+    /// from every point of its region (on), or fixed directions per region (off, for
+    /// comparison) [default: on].
+    #[arg(long, value_enum, value_name = "ON|OFF")]
+    parallax: Option<Switch>,
+}
+
+/// A setting that is on or off.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Switch {
+    /// On.
+    On,
+    /// Off.
+    Off,
 }
 
 #[derive(Args)]
@@ -436,7 +450,18 @@ fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingO
         }
         None => TrainBudget::Passes(a.train_passes),
     };
-    Ok(GuidingOptions { components, alpha: a.alpha, train, adaptive, ..GuidingOptions::default() })
+    let mut field = GuidingOptions::default().field;
+    if let Some(p) = a.parallax {
+        field.parallax = p == Switch::On;
+    }
+    Ok(GuidingOptions {
+        components,
+        alpha: a.alpha,
+        train,
+        adaptive,
+        field,
+        ..GuidingOptions::default()
+    })
 }
 
 fn run_train(a: TrainArgs) -> Result<()> {
@@ -523,6 +548,11 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
     }
     let guiding =
         validate_guiding(&a.guiding, a.field.is_some().then_some("rendering with --field"))?;
+    if a.field.is_some() && a.guiding.parallax.is_some() {
+        bail!(
+            "--parallax: a saved field keeps the setting it was trained with; give --parallax to `zerovar train`"
+        );
+    }
     let combine_training = a.training_images == TrainingImages::Combine;
     let guiding = GuidingOptions { combine_training, ..guiding };
     if let Some(f) = &a.field
