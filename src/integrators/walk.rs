@@ -167,10 +167,11 @@ fn walk<C: RadianceCache>(
             let medium = &scene.media[mi];
             let mut delta_share = 1.0;
             let (scatter_t, weight, emitted) = if guide.distances && alpha > 0.0 {
-                // Extra collisions serve the image, not the field's training (where they cost
-                // 30% more time); one past the last depth would not estimate any light.
+                // Training paths take extra collisions too: their images are averaged into
+                // the result, and without them they were far noisier than the render's (light
+                // shaft, 32 spp of which 31 training: relMSE 0.027 -> 0.019 for 10% more
+                // time). One past the last depth would not estimate any light.
                 let extra_nee = !scene.delta_lights.is_empty()
-                    && ctx.recorder.is_none()
                     && settings.max_depth.is_none_or(|d| s.depth + 1 < d);
                 let f = guided_flight(
                     medium, &s.ray, t_max, s.beta, alpha, extra_nee, ctx.cache, sampler, counters,
@@ -192,8 +193,12 @@ fn walk<C: RadianceCache>(
                         |wi| Spectrum::splat(phase.eval(dir, wi)),
                         |_| 0.0,
                     );
-                    // No recorder is listening: extra collisions stay out of training.
-                    l += s.beta * extra.weight * direct.contribution;
+                    // Light along the segment from the last vertex: what that vertex's
+                    // continuation brought back, as the next vertex's next-event estimate is
+                    // (the two share the delta lights by MIS, so the field learns all of it).
+                    let c = s.beta * extra.weight * direct.contribution;
+                    l += c;
+                    record_contribution(ctx, c);
                 }
                 match f.event {
                     GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted),
