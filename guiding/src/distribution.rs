@@ -76,9 +76,10 @@ impl Default for VolumeDistribution {
 
 impl VolumeDistribution {
     /// Loads the region of `field` at `pos` (`u` in `[0, 1)` drives the stochastic spatial
-    /// filter, if enabled). Returns false, and becomes a uniform distribution with zero
-    /// radiance, when the field has no trained region there: the renderer should then fall
-    /// back to phase-function sampling. Any product applied before is dropped.
+    /// filter, if enabled), its parallax-aware lobes re-aimed from the region's centre to
+    /// `pos`. Returns false, and becomes a uniform distribution with zero radiance, when the
+    /// field has no trained region there: the renderer should then fall back to
+    /// phase-function sampling. Any product applied before is dropped.
     pub fn init(&mut self, field: &Field, pos: Vec3, u: f32) -> bool {
         self.kind = ProductKind::None;
         match field.lookup_index(pos, u) {

@@ -5,7 +5,10 @@
 //! query takes `&self` (while rendering, from any number of threads). An update routes the
 //! samples to leaves, splits leaves that have seen enough samples, then refits every region
 //! that received samples, in parallel. Each region's fit reads only its own samples in input
-//! order, so the result does not depend on the number of threads.
+//! order, so the result does not depend on the number of threads. With parallax on
+//! (`FieldConfig::parallax`), each region fits its mixture to the directions from its centre
+//! towards where its samples' light came from, and lookups re-aim the lobes at those sources
+//! from the query point.
 
 use crate::GuidingError;
 use crate::config::{FieldConfig, MAX_NEIGHBOURS, SampleKind};
@@ -277,7 +280,9 @@ impl Field {
                 return;
             }
             // The batch is already in the spatial statistics (`refine`): the centre is the
-            // pivot the lobes are fitted from and re-aimed from.
+            // pivot the lobes are fitted from and re-aimed from. It moves a little as samples
+            // accumulate (and to a child's own samples at a split), and the stored statistics
+            // keep directions seen from where it was: a small error that new batches outweigh.
             region.centre = region.spatial.mean().as_vec3();
             region.spread = region.spatial.variance().element_sum().sqrt() as f32;
             let near = PARALLAX_NEAREST * region.spread;

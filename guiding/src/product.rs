@@ -128,10 +128,10 @@ impl BlockProduct {
     }
 }
 
-/// A block's means re-aimed by `offset` times each lane's inverse source distance, unit length
-/// (a lane keeps its mean bit for bit when its light comes from infinitely far, and where the
-/// sum vanishes: the source at the query point). Written as
-/// whole-lane array operations, which the compiler vectorises.
+/// A block's means re-aimed by `offset` times each lane's inverse source distance, unit
+/// length (a lane keeps its mean bit for bit when its light comes from infinitely far, and
+/// where the sum vanishes: the source at the query point). Written as whole-lane array
+/// operations, which the compiler vectorises.
 #[inline(always)]
 fn shifted(b: &Block, inv: &[f32; LANES], offset: Vec3) -> [[f32; LANES]; 3] {
     let mut out = [[0.0; LANES]; 3];
@@ -147,6 +147,18 @@ fn shifted(b: &Block, inv: &[f32; LANES], offset: Vec3) -> [[f32; LANES]; 3] {
         out[2][j] = if ok { z * inv_len } else { b.z[j] };
     }
     out
+}
+
+/// Adds each lane's weighted density at `dir` to `sum`, for the block's lobes with means
+/// `mean` (its own, or re-aimed ones).
+#[inline(always)]
+fn add_density(sum: &mut [f32; LANES], b: &Block, mean: [&[f32; LANES]; 3], dir: Vec3) {
+    for j in 0..LANES {
+        let (dx, dy, dz) = (mean[0][j] - dir.x, mean[1][j] - dir.y, mean[2][j] - dir.z);
+        // kappa (cos - 1), with cos - 1 = -|m - dir|^2 / 2 (see `vmf::cos_minus_one`).
+        let e = -0.5 * b.kappa[j] * (dx * dx + dy * dy + dz * dz);
+        sum[j] += b.weighted_norm[j] * lanes::exp(e);
+    }
 }
 
 /// A fixed-capacity set of weighted vMF lobes: `B` blocks of [`LANES`] lobes.
@@ -235,11 +247,7 @@ impl<const B: usize> LobeSet<B> {
         let mut sum = [0.0f32; LANES];
         for (b, inv) in self.blocks[..self.blocks_used()].iter().zip(inv_distance) {
             let [x, y, z] = shifted(b, inv, offset);
-            for j in 0..LANES {
-                let (dx, dy, dz) = (x[j] - dir.x, y[j] - dir.y, z[j] - dir.z);
-                let e = -0.5 * b.kappa[j] * (dx * dx + dy * dy + dz * dz);
-                sum[j] += b.weighted_norm[j] * lanes::exp(e);
-            }
+            add_density(&mut sum, b, [&x, &y, &z], dir);
         }
         sum.iter().sum()
     }
@@ -417,12 +425,7 @@ impl<const B: usize> LobeSet<B> {
     pub(crate) fn pdf(&self, dir: Vec3) -> f32 {
         let mut sum = [0.0f32; LANES];
         for b in &self.blocks[..self.blocks_used()] {
-            for j in 0..LANES {
-                let (dx, dy, dz) = (b.x[j] - dir.x, b.y[j] - dir.y, b.z[j] - dir.z);
-                // kappa (cos - 1), with cos - 1 = -|m - dir|^2 / 2 (see `vmf::cos_minus_one`).
-                let e = -0.5 * b.kappa[j] * (dx * dx + dy * dy + dz * dz);
-                sum[j] += b.weighted_norm[j] * lanes::exp(e);
-            }
+            add_density(&mut sum, b, [&b.x, &b.y, &b.z], dir);
         }
         sum.iter().sum()
     }
