@@ -87,7 +87,7 @@ impl VolumeDistribution {
                 let region = &field.regions()[index];
                 self.load_lanes(&region.lanes);
                 if region.lanes.parallax {
-                    self.base.shift_means(&region.lanes.inv_distance, region.lanes.centre - pos);
+                    self.base.shift_means(&region.lanes.inv_distance, region.centre() - pos);
                 }
                 self.fluence = region.fluence();
                 self.region = Some(index as u32);
@@ -267,7 +267,7 @@ mod tests {
 
     fn with_mixture(m: &Mixture, fluence: f32) -> VolumeDistribution {
         let mut d = VolumeDistribution::default();
-        d.load_lanes(&RegionLanes::new(m, &[0.0; crate::mixture::MAX_LOBES], Vec3::ZERO));
+        d.load_lanes(&RegionLanes::new(m, &[0.0; crate::mixture::MAX_LOBES]));
         d.fluence = fluence;
         d
     }
@@ -359,7 +359,7 @@ mod tests {
         .unwrap();
         let mut inv = [0.0; MAX_LOBES];
         (inv[0], inv[1], inv[2]) = (1.0 / 1.5, 0.0, 1.0 / 0.8);
-        let lanes = RegionLanes::new(&m, &inv, Vec3::ZERO);
+        let lanes = RegionLanes::new(&m, &inv);
         assert!(lanes.parallax);
         // From the centre, the query point lies 0.8 along +x: at the third lobe's source.
         let offset = Vec3::new(-0.8, 0.0, 0.0);

@@ -112,6 +112,18 @@ impl EmStats {
         })
     }
 
+    /// Checks the statistics are finite and non-negative (a loaded field's come from a file).
+    pub(crate) fn validate(&self) -> Result<(), String> {
+        let ok = |v: f64| v.is_finite() && v >= 0.0;
+        let lobes_ok = (0..MAX_LOBES)
+            .all(|k| ok(self.weight[k]) && ok(self.inv_distance[k]) && self.moment[k].is_finite());
+        if lobes_ok && ok(self.total_weight) && ok(self.count) && ok(self.positive_count) {
+            Ok(())
+        } else {
+            Err("EM statistics that are negative or not finite".into())
+        }
+    }
+
     /// Scales every statistic by `f`, used when a region splits in two.
     pub(crate) fn scale(&mut self, f: f64) {
         self.weight.iter_mut().for_each(|w| *w *= f);

@@ -28,9 +28,6 @@ use std::time::Instant;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Region {
     pub(crate) mixture: Mixture,
-    /// Per lobe, one over the (harmonic mean) distance from `centre` to its light; 0 for
-    /// light from infinitely far. Lookups re-aim lobes from `centre` to the query point.
-    pub(crate) inv_distance: [f32; MAX_LOBES],
     fluence: f32,
     pub(crate) em: EmStats,
     pub(crate) split_merge: splitmerge::LobeStats,
@@ -50,9 +47,8 @@ impl Region {
     fn new(config: &FieldConfig) -> Self {
         let mixture = em::initial_mixture(config.initial_lobes, config.initial_kappa);
         Self {
-            lanes: RegionLanes::new(&mixture, &[0.0; MAX_LOBES], Vec3::ZERO),
+            lanes: RegionLanes::new(&mixture, &[0.0; MAX_LOBES]),
             mixture,
-            inv_distance: [0.0; MAX_LOBES],
             fluence: 0.0,
             em: EmStats::default(),
             split_merge: splitmerge::LobeStats::default(),
@@ -85,7 +81,7 @@ impl Region {
         if !self.lanes.parallax {
             return self.lanes.lobes.pdf(dir);
         }
-        self.lanes.lobes.pdf_shifted(dir, &self.lanes.inv_distance, self.lanes.centre - pos)
+        self.lanes.lobes.pdf_shifted(dir, &self.lanes.inv_distance, self.centre - pos)
     }
 
     /// The fluence estimate `Phi(x)`: the mean of `radiance / pdf` over the region's samples,
@@ -122,9 +118,7 @@ impl Region {
         if !lobes_ok {
             return Err("a lobe with a non-unit mean or a bad concentration or weight".into());
         }
-        if !self.inv_distance.iter().all(|d| d.is_finite() && *d >= 0.0) {
-            return Err(format!("lobe source distances {:?}", self.inv_distance));
-        }
+        self.em.validate()?;
         if !(self.fluence.is_finite() && self.fluence >= 0.0 && self.centre.is_finite()) {
             return Err(format!("fluence {} at centre {}", self.fluence, self.centre));
         }
@@ -170,7 +164,7 @@ impl Field {
         last_update_seconds: f64,
     ) -> Self {
         for r in &mut regions {
-            r.lanes = RegionLanes::new(&r.mixture, &r.inv_distance, r.centre);
+            r.lanes = RegionLanes::new(&r.mixture, &r.em.lobe_inverse_distances());
         }
         let trained_regions = regions.iter().filter(|r| r.is_trained()).count();
         let centres = regions.iter().map(|r| r.centre).collect();
@@ -302,9 +296,8 @@ impl Field {
             if config.split_merge {
                 splitmerge::update(region, &dirs, config);
             }
-            region.inv_distance =
-                if config.parallax { region.em.lobe_inverse_distances() } else { [0.0; MAX_LOBES] };
-            region.lanes = RegionLanes::new(&region.mixture, &region.inv_distance, region.centre);
+            // Without parallax every sample's inverse distance is 0, and so is every lobe's.
+            region.lanes = RegionLanes::new(&region.mixture, &region.em.lobe_inverse_distances());
             let fluence =
                 if region.em.count > 0.0 { region.em.total_weight / region.em.count } else { 0.0 };
             region.fluence = fluence.min(f64::from(f32::MAX)) as f32;

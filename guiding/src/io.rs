@@ -16,7 +16,7 @@ use std::io::{Read, Write};
 pub const MAGIC: [u8; 8] = *b"ZVGUIDE\0";
 
 /// The format version this build writes and reads.
-pub const FORMAT_VERSION: u32 = 2;
+pub const FORMAT_VERSION: u32 = 3;
 
 #[derive(Serialize, Deserialize)]
 struct FieldData {

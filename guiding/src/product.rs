@@ -450,16 +450,10 @@ pub(crate) struct RegionLanes {
     pub(crate) inv_distance: [[f32; LANES]; MAX_LOBES / LANES],
     /// Whether any lobe has a finite source distance (else lookups skip re-aiming).
     pub(crate) parallax: bool,
-    /// The point the lobes were fitted from (the region's centre), kept next to them.
-    pub(crate) centre: Vec3,
 }
 
 impl RegionLanes {
-    pub(crate) fn new(
-        mixture: &crate::Mixture,
-        inv_distance: &[f32; MAX_LOBES],
-        centre: Vec3,
-    ) -> Self {
+    pub(crate) fn new(mixture: &crate::Mixture, inv_distance: &[f32; MAX_LOBES]) -> Self {
         let mut lobes = LobeSet::default();
         lobes.set_from(mixture);
         let mut mean_cosine = [[0.0; LANES]; MAX_LOBES / LANES];
@@ -476,7 +470,7 @@ impl RegionLanes {
             })
         });
         let parallax = inv_distance[..n].iter().any(|&d| d > 0.0);
-        Self { lobes, mean_cosine, inv_distance: inv, parallax, centre }
+        Self { lobes, mean_cosine, inv_distance: inv, parallax }
     }
 }
 

@@ -320,7 +320,7 @@ fn loading_rejects_other_versions_and_garbage() {
     assert!(Field::load(bytes.as_slice()).is_ok());
     // Well-formed data describing a region lookups cannot use.
     let mut bad = field.clone();
-    bad.regions[0].inv_distance[1] = f32::NAN;
+    bad.regions[0].em.scale(f64::NAN);
     let mut bytes = Vec::new();
     bad.save(&mut bytes).unwrap();
     match Field::load(bytes.as_slice()) {
@@ -410,7 +410,7 @@ fn parallax_aware_lobes_aim_at_a_nearby_light_from_anywhere_in_the_region() {
             region.mixture().lobes()[a].weight.total_cmp(&region.mixture().lobes()[b].weight)
         })
         .unwrap();
-    let distance = 1.0 / region.inv_distance[k];
+    let distance = 1.0 / region.em.lobe_inverse_distances()[k];
     assert!((distance - 2.0).abs() < 0.2, "learned distance {distance}");
 }
 
@@ -429,7 +429,7 @@ fn light_from_infinitely_far_is_not_re_aimed() {
         .collect();
     field.update(&batch).unwrap();
     let region = &field.regions()[0];
-    assert!(region.inv_distance.iter().all(|&v| v == 0.0));
+    assert!(region.em.lobe_inverse_distances().iter().all(|&v| v == 0.0));
     let (mut a, mut b) = (VolumeDistribution::default(), VolumeDistribution::default());
     assert!(a.init(&field, Vec3::ZERO, 0.5) && b.init(&field, Vec3::ONE, 0.5));
     for k in 0..MAX_LOBES {
