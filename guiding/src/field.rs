@@ -157,7 +157,7 @@ impl Field {
 
     pub(crate) fn from_parts(
         config: FieldConfig,
-        tree: KdTree,
+        mut tree: KdTree,
         mut regions: Vec<Region>,
         iterations: u32,
         total_samples: u64,
@@ -166,6 +166,7 @@ impl Field {
         for r in &mut regions {
             r.lanes = RegionLanes::new(&r.mixture, &r.em.lobe_inverse_distances());
         }
+        tree.index_cells();
         let trained_regions = regions.iter().filter(|r| r.is_trained()).count();
         let centres = regions.iter().map(|r| r.centre).collect();
         Self {
@@ -266,6 +267,7 @@ impl Field {
             accepted_count += 1;
         }
         self.refine(samples, &mut lists);
+        self.tree.index_cells();
 
         let settings = self.em_settings();
         let config = &self.config;

@@ -3,10 +3,14 @@
 //! The root covers all of space, so every position has a leaf. A leaf splits once it has seen
 //! enough samples, on the axis where its samples spread most, at their mean: dense parts of the
 //! scene get small regions, sparse parts keep large ones. Nodes live in one vector, children
-//! side by side, so a lookup is a short loop over a few cache lines.
+//! side by side, and a uniform grid of start nodes ([`start_grid`]) lets most lookups skip
+//! the descent.
+
+mod start_grid;
 
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
+use start_grid::StartGrid;
 
 const LEAF: u8 = 3;
 
@@ -23,22 +27,35 @@ pub(crate) struct Node {
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub(crate) struct KdTree {
     nodes: Vec<Node>,
+    /// Where lookups start; derived from `nodes` (not saved), and empty (start at the root)
+    /// from a split until [`index_cells`](Self::index_cells) runs.
+    #[serde(skip)]
+    starts: StartGrid,
 }
 
 impl KdTree {
     /// One leaf, for region 0, covering everything.
     pub(crate) fn new() -> Self {
-        Self { nodes: vec![Node { split: 0.0, axis: LEAF, child: 0 }] }
+        Self {
+            nodes: vec![Node { split: 0.0, axis: LEAF, child: 0 }],
+            starts: StartGrid::default(),
+        }
     }
 
     /// The region containing `pos` and the index of its leaf node. Positions exactly on a
     /// split plane go to the upper side.
     #[inline]
     pub(crate) fn lookup(&self, pos: Vec3) -> (usize, usize) {
+        self.descend(pos, self.starts.start(pos))
+    }
+
+    /// [`lookup`](Self::lookup) from node `from`, which must contain `pos`.
+    #[inline]
+    fn descend(&self, pos: Vec3, from: usize) -> (usize, usize) {
         // Indexed by the axis without glam's per-component match, which costs a hard-to-predict
         // branch at every level; the fourth slot is never read (inner nodes have axis < 3).
         let p = [pos.x, pos.y, pos.z, 0.0];
-        let mut i = 0;
+        let mut i = from;
         loop {
             let n = self.nodes[i];
             if n.axis == LEAF {
@@ -56,6 +73,12 @@ impl KdTree {
         self.nodes.push(Node { split: 0.0, axis: LEAF, child: lower });
         self.nodes.push(Node { split: 0.0, axis: LEAF, child: upper });
         self.nodes[node] = Node { split, axis: axis as u8, child };
+        self.starts = StartGrid::default();
+    }
+
+    /// Builds the grid of start nodes for the tree as it is (after splits, and after loading).
+    pub(crate) fn index_cells(&mut self) {
+        self.starts = StartGrid::build(&self.nodes);
     }
 
     pub(crate) fn node_count(&self) -> usize {
@@ -63,7 +86,7 @@ impl KdTree {
     }
 
     pub(crate) fn memory_bytes(&self) -> usize {
-        self.nodes.capacity() * std::mem::size_of::<Node>()
+        self.nodes.capacity() * std::mem::size_of::<Node>() + self.starts.memory_bytes()
     }
 
     /// Depth of the deepest leaf (the root alone has depth 0).
@@ -175,6 +198,112 @@ mod tests {
         assert_eq!(t.depth(), 2);
         t.validate(3).unwrap();
         assert!(t.validate(4).is_err());
+    }
+
+    /// A tree of `leaves` leaves from splits of random leaves at random planes through the
+    /// box -5..5 (a plain xorshift, so the test needs no generator).
+    fn random_tree(leaves: usize, seed: u64) -> KdTree {
+        let mut state = seed | 1;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut t = KdTree::new();
+        for r in 1..leaves {
+            let p = Vec3::new(next(), next(), next()) * 10.0 - 5.0;
+            let (region, leaf) = t.lookup(p);
+            let axis = (next() * 3.0) as usize % 3;
+            t.split(leaf, axis, p[axis], region as u32, r as u32);
+        }
+        t
+    }
+
+    #[test]
+    fn start_grid_lookups_find_the_leaf_a_descent_from_the_root_finds() {
+        for (leaves, seed) in [(2, 1), (40, 2), (1000, 3), (3000, 4)] {
+            let mut t = random_tree(leaves, seed);
+            t.validate(leaves).unwrap();
+            t.index_cells();
+            assert!(!t.starts.start.is_empty(), "{leaves} leaves");
+            let mut points: Vec<Vec3> = Vec::new();
+            // A lattice over and past the box, finer than the cells.
+            for i in 0..=60 {
+                for j in 0..=60 {
+                    for k in 0..=15 {
+                        let f = |v: i32, n: f32| v as f32 / n * 14.0 - 7.0;
+                        points.push(Vec3::new(f(i, 60.0), f(j, 60.0), f(k, 15.0)));
+                    }
+                }
+            }
+            // Exactly on every split plane and a hair either side, and on cell boundaries.
+            for n in t.nodes.iter().filter(|n| n.axis < 3) {
+                for v in [n.split, n.split.next_down(), n.split.next_up()] {
+                    let mut p = Vec3::splat(0.3);
+                    p[usize::from(n.axis)] = v;
+                    points.push(p);
+                }
+            }
+            for a in 0..3 {
+                for c in 0..t.starts.dims[a] {
+                    if t.starts.scale[a] > 0.0 {
+                        let mut p = Vec3::splat(-0.2);
+                        p[a] = t.starts.origin[a] + c as f32 / t.starts.scale[a];
+                        points.extend([p, Vec3::from_array(p.to_array().map(f32::next_up))]);
+                    }
+                }
+            }
+            points.extend([
+                Vec3::NAN,
+                Vec3::INFINITY,
+                Vec3::NEG_INFINITY,
+                Vec3::new(f32::NAN, 0.0, 0.0),
+            ]);
+            // Levels a descent from `from` goes down to reach `p`'s leaf.
+            let levels = |p: Vec3, from: usize| {
+                let (mut i, mut n) = (from, 0);
+                while t.nodes[i].axis != LEAF {
+                    let node = t.nodes[i];
+                    i = node.child as usize + usize::from(p[usize::from(node.axis)] >= node.split);
+                    n += 1;
+                }
+                n
+            };
+            let (mut from_root, mut from_start) = (0, 0);
+            for &p in &points {
+                assert_eq!(t.lookup(p), t.descend(p, 0), "{leaves} leaves, {p}");
+                if p.abs().max_element() < 5.0 {
+                    from_root += levels(p, 0);
+                    from_start += levels(p, t.starts.start(p));
+                }
+            }
+            // The grid is worth having: among the splits, it saves most of each descent.
+            if leaves > 2 {
+                assert!(from_start * 2 < from_root, "{leaves} leaves: {from_start} of {from_root}");
+            }
+            // A split discards the grid, so lookups never read a stale one.
+            let (region, leaf) = t.lookup(Vec3::splat(0.1));
+            t.split(leaf, 0, 0.1, region as u32, leaves as u32);
+            assert_eq!(t.lookup(Vec3::splat(0.1)).0, leaves);
+            assert_eq!(t.lookup(Vec3::splat(0.1)), t.descend(Vec3::splat(0.1), 0));
+        }
+        // One leaf, or splits along one axis only: nothing to skip, or a grid of one row.
+        let mut t = KdTree::new();
+        t.index_cells();
+        assert_eq!(t.lookup(Vec3::ONE), (0, 0));
+        for (i, x) in [1.0f32, 2.0, 3.0].into_iter().enumerate() {
+            let (region, leaf) = t.lookup(Vec3::new(x, 7.0, -7.0));
+            t.split(leaf, 0, x, region as u32, i as u32 + 1);
+        }
+        t.index_cells();
+        assert_eq!(t.starts.dims[1..], [1, 1]);
+        for x in [-1.0f32, 1.0, 1.5, 2.0, 2.9, 3.0, 9.0] {
+            for y in [-1e30f32, 0.0, f32::INFINITY] {
+                let p = Vec3::new(x, y, 0.5);
+                assert_eq!(t.lookup(p), t.descend(p, 0), "{p}");
+            }
+        }
     }
 
     #[test]
