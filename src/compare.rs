@@ -57,7 +57,8 @@ pub enum CompareError {
 
 impl Method {
     /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
-    /// distances, rr, full or a +-list), `alpha`, `train-passes`, `train-time` (seconds),
+    /// distances, rr, full or a +-list), `alpha`, `distance-alpha`, `train-passes`,
+    /// `train-time` (seconds),
     /// `tracker` (a `--tracker` name), `combine` (true, the default: training images join the
     /// result by inverse variance; false discards them, as `--training-images`), `parallax`
     /// (on, the default, or off: the field's lobes fixed per region, as `--parallax off`).
@@ -91,6 +92,13 @@ impl Method {
                         return Err(err(format!("alpha {a} must lie in [0, 1]")));
                     }
                     m.options.guiding.alpha = a as f32;
+                }
+                "distance-alpha" => {
+                    let a = number()?;
+                    if !(0.0..=1.0).contains(&a) {
+                        return Err(err(format!("distance-alpha {a} must lie in [0, 1]")));
+                    }
+                    m.options.guiding.distance_alpha = a as f32;
                 }
                 "train-passes" => {
                     let n = number()?;
@@ -129,7 +137,7 @@ impl Method {
                 }
                 _ => {
                     return Err(err(format!(
-                        "unknown option `{key}`; use guiding, alpha, train-passes, train-time, tracker, combine or parallax"
+                        "unknown option `{key}`; use guiding, alpha, distance-alpha, train-passes, train-time, tracker, combine or parallax"
                     )));
                 }
             }
@@ -380,8 +388,12 @@ mod tests {
     #[test]
     fn method_options_parse_and_bad_ones_are_named() {
         let base = RenderOptions::unguided(Budget::Samples(4), 1);
-        let m = Method::parse("g=guiding:full,alpha:0.7,train-passes:3,combine:false", &base)
-            .expect("valid method");
+        let m = Method::parse(
+            "g=guiding:full,alpha:0.7,distance-alpha:0.25,train-passes:3,combine:false",
+            &base,
+        )
+        .expect("valid method");
+        assert_eq!(m.options.guiding.distance_alpha, 0.25);
         assert!(m.options.guiding.field.parallax);
         let flat = Method::parse("f=guiding:full,parallax:off", &base).expect("valid method");
         assert!(!flat.options.guiding.field.parallax);
@@ -396,6 +408,7 @@ mod tests {
             ("g=combine:maybe", "combine: `maybe` is not true or false"),
             ("g=parallax:some", "parallax: `some` is not on or off"),
             ("g=alpha:2", "alpha 2 must lie in [0, 1]"),
+            ("g=distance-alpha:-1", "distance-alpha -1 must lie in [0, 1]"),
             ("g=speed:3", "unknown option `speed`"),
             ("g=guiding", "is not key:value"),
             ("bad name=guiding:full", "the name must be"),

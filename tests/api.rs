@@ -153,6 +153,11 @@ fn options_assembled_in_code_are_validated_before_any_work() {
         },
         {
             let mut o = good();
+            o.guiding.distance_alpha = -0.5;
+            (o, OptionsError::DistanceAlpha(-0.5))
+        },
+        {
+            let mut o = good();
             o.guiding.train = TrainBudget::Passes(21);
             (o, OptionsError::TrainPasses(21))
         },
@@ -173,6 +178,9 @@ fn options_assembled_in_code_are_validated_before_any_work() {
     let mut nan = good();
     nan.guiding.alpha = f32::NAN;
     assert!(matches!(nan.validate(), Err(OptionsError::Alpha(a)) if a.is_nan()));
+    let mut nan = good();
+    nan.guiding.distance_alpha = f32::NAN;
+    assert!(matches!(nan.validate(), Err(OptionsError::DistanceAlpha(a)) if a.is_nan()));
     assert_eq!(good().validate(), Ok(()));
 }
 

@@ -272,6 +272,7 @@ fn trains_a_field_and_renders_with_it() {
     for (args, needle) in [
         (vec!["--guiding", "sideways"], "--guiding sideways"),
         (vec!["--guiding", "full", "--alpha", "1.5"], "--alpha 1.5"),
+        (vec!["--guiding", "full", "--distance-alpha", "2"], "--distance-alpha 2"),
         (vec!["--guiding", "full", "--train-passes", "0"], "--train-passes 0"),
         // A field with nothing to guide would be loaded for nothing.
         (vec!["--guiding", "off", "--field", f], "--guiding off: rendering with --field"),

@@ -81,8 +81,9 @@ struct CompareArgs {
     reference: PathBuf,
     #[command(flatten)]
     budget: BudgetArgs,
-    /// A method: NAME=key:value,... with keys guiding, alpha, train-passes, train-time, tracker,
-    /// combine, parallax (repeatable) [default: unguided and guided=guiding:full].
+    /// A method: NAME=key:value,... with keys guiding, alpha, distance-alpha, train-passes,
+    /// train-time, tracker, combine, parallax (repeatable) [default: unguided and
+    /// guided=guiding:full].
     #[arg(long, value_name = "NAME=OPTIONS")]
     method: Vec<String>,
     /// Directory for the tables and images.
@@ -115,6 +116,12 @@ struct GuidingArgs {
     /// (used up to 0.8: standard sampling always keeps 20%, which bounds every weight).
     #[arg(long, default_value_t = 0.5)]
     alpha: f32,
+    /// Probability of the zero-variance collision density in guided flights' mixture with
+    /// standard tracking, in [0, 1] (used up to 0.8). Guided flights take extra collisions for
+    /// delta lights whatever it is; the default 0 spares each flight a field lookup, which at
+    /// equal time paid better on every bench scene.
+    #[arg(long, default_value_t = zerovar::render::DEFAULT_DISTANCE_ALPHA)]
+    distance_alpha: f32,
     /// Training passes of 1, 2, 4, ... samples per pixel before rendering.
     #[arg(long, default_value_t = 5, conflicts_with = "train_time")]
     train_passes: u32,
@@ -440,6 +447,9 @@ fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingO
     if !(0.0..=1.0).contains(&a.alpha) {
         bail!("--alpha {}: give a probability in [0, 1]", a.alpha);
     }
+    if !(0.0..=1.0).contains(&a.distance_alpha) {
+        bail!("--distance-alpha {}: give a probability in [0, 1]", a.distance_alpha);
+    }
     let train = match a.train_time {
         Some(t) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
             bail!("--train-time {t}: give a positive number of seconds")
@@ -457,6 +467,7 @@ fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingO
     Ok(GuidingOptions {
         components,
         alpha: a.alpha,
+        distance_alpha: a.distance_alpha,
         train,
         adaptive,
         field,

@@ -249,7 +249,8 @@ impl GuidedDistance {
         })
     }
 
-    /// Computes the guided probability of segment `k` from the cache.
+    /// Computes the guided probability of segment `k` from the cache; nothing at `alpha` 0,
+    /// where no guided probability counts, so that such flights pay for no lookup.
     fn compute(
         &mut self,
         k: usize,
@@ -258,7 +259,7 @@ impl GuidedDistance {
         counters: &mut Counters,
     ) {
         let s = &mut self.segments[k];
-        if s.start >= self.guided_end {
+        if s.start >= self.guided_end || self.alpha == 0.0 {
             return; // the tail follows the standard exponential
         }
         let mid = self.ray.at(s.start + 0.5 * s.length);

@@ -68,6 +68,10 @@ pub struct WalkSettings {
     pub guide: Components,
     /// Probability of the guided strategy in each mixture, in [0, 1].
     pub alpha: f32,
+    /// Probability of the zero-variance collision density in guided flights, in [0, 1]
+    /// (`render::DEFAULT_DISTANCE_ALPHA`); limited like `alpha`, and zero wherever `alpha`
+    /// has stopped guiding the path.
+    pub distance_alpha: f32,
 }
 
 /// What the walk needs to know about the pixel and the training it feeds.
@@ -173,8 +177,17 @@ fn walk<C: RadianceCache>(
                 // time). One past the last depth would not estimate any light.
                 let extra_nee = !scene.delta_lights.is_empty()
                     && settings.max_depth.is_none_or(|d| s.depth + 1 < d);
+                let distance_alpha = settings.distance_alpha.min(MAX_ALPHA);
                 let f = guided_flight(
-                    medium, &s.ray, t_max, s.beta, alpha, extra_nee, ctx.cache, sampler, counters,
+                    medium,
+                    &s.ray,
+                    t_max,
+                    s.beta,
+                    distance_alpha,
+                    extra_nee,
+                    ctx.cache,
+                    sampler,
+                    counters,
                 );
                 s.guided_gain *= f.gain;
                 delta_share = f.delta_share;
