@@ -58,10 +58,10 @@ pub enum CompareError {
 impl Method {
     /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
     /// distances, rr, full or a +-list), `alpha`, `distance-alpha`, `train-passes`,
-    /// `train-time` (seconds),
-    /// `tracker` (a `--tracker` name), `combine` (true, the default: training images join the
-    /// result by inverse variance; false discards them, as `--training-images`), `parallax`
-    /// (on, the default, or off: the field's lobes fixed per region, as `--parallax off`).
+    /// `train-time` (seconds), `tracker` (a `--tracker` name), `combine` (true, the default:
+    /// training images join the result by inverse variance; false discards them, as
+    /// `--training-images`), `parallax` (on, the default, or off: the field's lobes fixed per
+    /// region, as `--parallax off`).
     /// `NAME` alone means `base` unchanged.
     pub fn parse(spec: &str, base: &RenderOptions) -> Result<Self, CompareError> {
         let err = |why: String| CompareError::Method { spec: spec.to_string(), why };

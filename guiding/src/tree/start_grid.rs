@@ -5,7 +5,7 @@
 //! deepest node whose part of space contains the whole cell: a leaf, or a node a few levels
 //! above the leaves where split planes cross the cell. A lookup from there finds exactly the
 //! leaf a descent from the root finds, because every node above it sends the whole cell the
-//! same way (light shaft, single thread: renders 3-5% faster, images identical). The grid is
+//! same way (light shaft, single thread: renders 1-5% faster, images identical). The grid is
 //! rebuilt whenever the tree changes.
 
 use super::{LEAF, Node};
