@@ -528,6 +528,30 @@ fn render_with(s: &Scene, components: Components, alpha: f32, spp: u32, seed: u6
     render_adaptive(s, components, alpha, spp, seed, false).film
 }
 
+/// At distance alpha 0 (the default) guided flights ask the field nothing: every lookup is a
+/// vertex's (at most one each), while they still take extra collisions for the point light;
+/// with the zero-variance collision density mixed in, flights look the field up too.
+#[test]
+fn flights_at_distance_alpha_zero_pay_for_no_field_lookup() {
+    let s = scene(FOG);
+    let counters = |distance_alpha: f32| {
+        let guiding = GuidingOptions {
+            components: Components::FULL,
+            distance_alpha,
+            train: TrainBudget::Passes(3),
+            ..GuidingOptions::default()
+        };
+        let options = RenderOptions { budget: Budget::Samples(8), seed: 2, threads: None, guiding };
+        render(&s, &options, &|_, _| true).unwrap().counters
+    };
+    for (distance_alpha, flights_look_up) in [(0.0, false), (0.5, true)] {
+        let c = counters(distance_alpha);
+        let vertices = c.medium_scatters + c.surface_scatters;
+        assert!(c.extra_collisions > 0 && vertices > 0, "{c:?}");
+        assert_eq!(c.field_lookups > vertices, flights_look_up, "alpha {distance_alpha}: {c:?}");
+    }
+}
+
 fn render_adaptive(
     s: &Scene,
     components: Components,
