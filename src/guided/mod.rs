@@ -11,6 +11,7 @@
 
 pub mod distance;
 mod grid;
+mod plain_flight;
 mod saved;
 pub mod window;
 

@@ -1,0 +1,90 @@
+//! Guided flights that keep standard tracking's collision density: distance alpha 0 (the
+//! default) in a grey, homogeneous, non-emissive medium, the fog of most scenes.
+//!
+//! There the mixture of `distance::GuidedDistance` reduces to the exponential free path, whose
+//! weights are the albedo at a collision and 1 past the ray's end, and what is left of guiding
+//! is the extra collision for delta lights. Done in closed form, a flight costs about four
+//! transcendental functions instead of sixteen: the transmittance to the flight's collision is
+//! `1 - u` of its own draw, and to the extra one the part's decay power times its offset's.
+//! The densities are those `GuidedDistance` reports for the same flight (a test compares them).
+
+use super::RadianceCache;
+use super::distance::{
+    CUT, DIRECT_SEGMENTS, DirectStretch, ExtraCollision, GuidedEvent, GuidedFlight, direct_stretch,
+};
+use crate::math::{Ray, Spectrum};
+use crate::rng::Sampler;
+
+/// A flight along `ray` within `(0, t_max)` through a medium of extinction `sigma` (grey) and
+/// single-scattering albedo `albedo`, with an extra collision for delta lights when
+/// `extra_nee` (its placement asks `cache` about HG with `g`).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn plain_flight(
+    sigma: f32,
+    albedo: Spectrum,
+    g: f32,
+    ray: &Ray,
+    t_max: f32,
+    extra_nee: bool,
+    cache: &mut impl RadianceCache,
+    sampler: &mut Sampler,
+) -> GuidedFlight {
+    let pass = GuidedFlight::new(GuidedEvent::Pass, Spectrum::ONE, 1.0);
+    if !(sigma > 0.0 && t_max > 0.0) {
+        return pass; // nothing to collide with, or no room to
+    }
+    // The flight: transmittance `survive` to `t`, density `sigma survive`.
+    let u = sampler.next_1d();
+    let survive = 1.0 - u;
+    let t = -(-u).ln_1p() / sigma;
+    let collides = t < t_max;
+    let mut flight =
+        if collides { GuidedFlight::new(GuidedEvent::Scatter { t }, albedo, 1.0) } else { pass };
+    if !extra_nee {
+        return flight;
+    }
+    let guided_end = t_max.min(CUT / sigma);
+    let d = direct_stretch(
+        ray,
+        guided_end,
+        Spectrum::splat(sigma),
+        Spectrum::splat(1.0 / 3.0),
+        g,
+        cache,
+    );
+    if !(d.total > 0.0 && d.total.is_finite()) {
+        return flight;
+    }
+    let (collide, decay) = (d.collide.x, d.decay.x);
+    if let Some(j) = d.pick(sampler.next_1d()) {
+        // The offset in part j: its truncated exponential, kept inside the part.
+        let v = sampler.next_1d();
+        let mut within = 1.0 - v * collide; // transmittance from the part's start
+        let mut x = -(-v * collide).ln_1p() / sigma;
+        let last = d.length * (1.0 - 1e-6);
+        if x >= last {
+            x = last;
+            within = (-sigma * x).exp();
+        }
+        let transmittance = decay.powi(j as i32) * within;
+        let direct = part_density(&d, j, within, sigma);
+        let own = sigma * transmittance;
+        let weight = albedo * (own / (own + direct));
+        flight.extra = Some(ExtraCollision { t: j as f32 * d.length + x, weight });
+    }
+    if collides && t < guided_end {
+        // The balance heuristic's share of the flight's own collision.
+        let j = ((t / d.length) as usize).min(DIRECT_SEGMENTS - 1);
+        let within = survive / decay.powi(j as i32);
+        let own = sigma * survive;
+        flight.delta_share = own / (own + part_density(&d, j, within, sigma));
+    }
+    flight
+}
+
+/// The extra collision's density at a point of part `j` whose transmittance from the part's
+/// start is `within`.
+#[inline]
+fn part_density(d: &DirectStretch, j: usize, within: f32, sigma: f32) -> f32 {
+    if d.weights[j] > 0.0 { d.weights[j] / d.total * sigma * within / d.collide.x } else { 0.0 }
+}
