@@ -31,6 +31,10 @@ pub struct DirectGrid {
     /// needs no more, and half the bytes keep more of the grid in cache (its reads along
     /// rays wait on memory).
     values: Vec<u16>,
+    /// The box of cells with light, in grid coordinates (derived from `values`): a read
+    /// outside it is zero without touching memory, and most of a ray's parts lie outside a
+    /// shaft of sunlight.
+    lit: (Vec3A, Vec3A),
 }
 
 /// `v` as bfloat16 (the high half of its bits: truncation, which keeps 0 and sign).
@@ -55,7 +59,7 @@ impl DirectGrid {
         // Cells a hair larger than extent / CELLS_LONGEST, so the maximum falls inside.
         let scale = CELLS_LONGEST / (extent * (1.0 + 1e-5));
         let dims = ((max - min) * scale).floor().as_uvec3() + UVec3::ONE;
-        let mut grid = Self { min, scale, dims, values: Vec::new() };
+        let mut grid = Self { min, scale, dims, ..Self::default() };
         let n = (dims.x * dims.y * dims.z) as usize;
         let (mut sums, mut counts) = (vec![0.0f64; n], vec![0u32; n]);
         for r in records {
@@ -69,7 +73,20 @@ impl DirectGrid {
             .zip(&counts)
             .map(|(&s, &c)| to_bf16(if c > 0 { (s / f64::from(c)) as f32 } else { 0.0 }))
             .collect();
+        grid.lit = grid.lit_box();
         grid
+    }
+
+    /// The smallest box of whole cells holding every cell with light (an empty box if none).
+    fn lit_box(&self) -> (Vec3A, Vec3A) {
+        let (mut lo, mut hi) = (self.dims, UVec3::ZERO);
+        let (nx, ny) = (self.dims.x as usize, self.dims.y as usize);
+        for (i, _) in self.values.iter().enumerate().filter(|(_, v)| from_bf16(**v) > 0.0) {
+            let c = UVec3::new((i % nx) as u32, ((i / nx) % ny) as u32, (i / (nx * ny)) as u32);
+            lo = lo.min(c);
+            hi = hi.max(c + UVec3::ONE);
+        }
+        (lo.as_vec3a(), hi.as_vec3a())
     }
 
     fn index(&self, x: Vec3A) -> Option<usize> {
@@ -87,9 +104,9 @@ impl DirectGrid {
     pub fn fluence_along(&self, start: Vec3A, step: Vec3A, out: &mut [f32]) {
         let d = step * self.scale;
         let mut c = (start - self.min) * self.scale + 0.5 * d;
-        let dims = self.dims.as_vec3a();
+        let (lo, hi) = self.lit;
         for v in out {
-            *v = if c.cmpge(Vec3A::ZERO).all() && c.cmplt(dims).all() {
+            *v = if c.cmpge(lo).all() && c.cmplt(hi).all() {
                 let i = c.as_uvec3();
                 from_bf16(self.values[(i.x + self.dims.x * (i.y + self.dims.y * i.z)) as usize])
             } else {
@@ -138,7 +155,9 @@ impl DirectGrid {
             }
             values.push(to_bf16(v));
         }
-        Ok(Self { min, scale, dims, values })
+        let mut grid = Self { min, scale, dims, values, lit: Default::default() };
+        grid.lit = grid.lit_box();
+        Ok(grid)
     }
 
     /// The direct fluence at `x` (zero outside the grid).
@@ -196,6 +215,10 @@ mod tests {
         records.push(record(0.0, 0.0, 0.0, 0.0));
         records.push(record(8.0, 2.0, 1.0, 0.0));
         let grid = DirectGrid::build(&records);
+        // Light only in x < 2 (16 of 64 cells), every y, the one layer of z: reads skip the
+        // rest.
+        assert_eq!((grid.dims.x, grid.dims.z), (64, 1));
+        assert_eq!(grid.lit, (Vec3A::ZERO, Vec3A::new(16.0, 16.0, 1.0)));
         assert_eq!(grid.fluence(Vec3A::new(1.0, 1.0, 0.5)), 4.0);
         assert_eq!(grid.fluence(Vec3A::new(3.0, 1.0, 0.5)), 0.0);
         // Outside the box, and not a point at all.
