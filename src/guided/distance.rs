@@ -132,13 +132,22 @@ pub(super) fn direct_stretch(
     cache: &mut impl RadianceCache,
 ) -> DirectStretch {
     let h = guided_end / DIRECT_SEGMENTS as f32;
+    let mut d = DirectStretch {
+        weights: [0.0; DIRECT_SEGMENTS],
+        total: 0.0,
+        length: h,
+        collide: Spectrum::ZERO,
+        decay: Spectrum::ONE,
+    };
+    let dir = ray.direction;
+    cache.direct_along(ray.origin, dir * h, dir, g, &mut d.weights);
+    if !d.weights.iter().any(|&w| w > 0.0) {
+        return d; // most rays miss a shaft of sunlight: no weights, no exponentials
+    }
     let collide =
         Spectrum::select(sigma.cmpgt(Spectrum::ZERO), -exp_m1(-sigma * h), Spectrum::ZERO);
     let decay = exp(-sigma * h);
-    let mut d =
-        DirectStretch { weights: [0.0; DIRECT_SEGMENTS], total: 0.0, length: h, collide, decay };
-    let dir = ray.direction;
-    cache.direct_along(ray.origin, dir * h, dir, g, &mut d.weights);
+    (d.collide, d.decay) = (collide, decay);
     let mut mass = pick;
     for w in &mut d.weights {
         *w = positive_or_zero(mass.dot(collide) * *w);

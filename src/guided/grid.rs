@@ -103,15 +103,20 @@ impl DirectGrid {
     #[inline]
     pub fn fluence_along(&self, start: Vec3A, step: Vec3A, out: &mut [f32]) {
         let d = step * self.scale;
-        let mut c = (start - self.min) * self.scale + 0.5 * d;
+        let c0 = (start - self.min) * self.scale + 0.5 * d;
         let (lo, hi) = self.lit;
-        for v in out {
-            *v = if c.cmpge(lo).all() && c.cmplt(hi).all() {
+        out.fill(0.0);
+        // The parts whose middles may lie in the lit box (a part more on each side against
+        // rounding); each is still checked exactly, as `c0 + j d` accumulates.
+        let (first, end) = parts_within(c0, d, lo, hi, out.len());
+        let mut c = c0;
+        for (j, v) in out.iter_mut().enumerate().take(end) {
+            if j >= first && c.cmpge(lo).all() && c.cmplt(hi).all() {
                 let i = c.as_uvec3();
-                from_bf16(self.values[(i.x + self.dims.x * (i.y + self.dims.y * i.z)) as usize])
-            } else {
-                0.0
-            };
+                *v = from_bf16(
+                    self.values[(i.x + self.dims.x * (i.y + self.dims.y * i.z)) as usize],
+                );
+            }
             c += d;
         }
     }
@@ -165,6 +170,33 @@ impl DirectGrid {
     pub fn fluence(&self, x: Vec3A) -> f32 {
         self.index(x).map_or(0.0, |i| from_bf16(self.values[i]))
     }
+}
+
+/// The range `first..end` of `j` in `0..n` outside which `c0 + j d` is certainly outside the
+/// box `[lo, hi)` (empty if the line misses it), widened by one on each side.
+fn parts_within(c0: Vec3A, d: Vec3A, lo: Vec3A, hi: Vec3A, n: usize) -> (usize, usize) {
+    let (mut a, mut b) = (0.0f32, n as f32);
+    for k in 0..3 {
+        if d[k] == 0.0 {
+            if !(c0[k] >= lo[k] && c0[k] < hi[k]) {
+                return (0, 0);
+            }
+            continue;
+        }
+        let (t0, t1) = ((lo[k] - c0[k]) / d[k], (hi[k] - c0[k]) / d[k]);
+        a = a.max(t0.min(t1));
+        b = b.min(t0.max(t1));
+    }
+    // NaN (a ray of NaN) leaves the whole range to the exact checks.
+    if a.is_nan() || b.is_nan() {
+        return (0, n);
+    }
+    if a > b {
+        return (0, 0);
+    }
+    let first = (a.floor() - 1.0).max(0.0) as usize;
+    let end = ((b.ceil() + 1.0).max(0.0) as usize).min(n);
+    (first, end)
 }
 
 /// The box holding all finite record positions but the `OUTLIERS` on each side of each axis.
@@ -238,6 +270,48 @@ mod tests {
             let q = from_bf16(to_bf16(v));
             assert!(q <= v && q > v * (1.0 - 1.0 / 128.0), "{v} -> {q}");
         }
+    }
+
+    /// Reads along a ray skip the parts outside the lit box by a range computed up front;
+    /// every part must still read what a lookup at its middle reads, whatever the ray: from
+    /// inside or outside, along an axis (steps of zero), backwards, grazing the box.
+    #[test]
+    fn reads_along_any_ray_match_single_lookups() {
+        // Light in a ball of radius 0.8 about (2, 1.5, 1) in a 4 x 3 x 2 box of records.
+        let mut records = Vec::new();
+        let mut sampler = crate::rng::Sampler::new(3, 0, 0);
+        let centre = Vec3A::new(2.0, 1.5, 1.0);
+        for _ in 0..50_000 {
+            let u = Vec3A::new(sampler.next_1d(), sampler.next_1d(), sampler.next_1d());
+            let p = u * Vec3A::new(4.0, 3.0, 2.0);
+            let lit = if (p - centre).length() < 0.8 { 1.0 + p.x } else { 0.0 };
+            records.push(record(p.x, p.y, p.z, lit));
+        }
+        let grid = DirectGrid::build(&records);
+        assert!(grid.lit.0.cmpgt(Vec3A::ZERO).all(), "the lit box is inside the grid");
+        let mut lit_parts = 0;
+        for i in 0..4000 {
+            let mut v = || 6.0 * sampler.next_1d() - 1.5;
+            let start = Vec3A::new(v(), v(), v());
+            // Towards a point near the light, reached at about the middle of the ray.
+            let target = centre + (Vec3A::new(v(), v(), v()) - 1.5) / 3.0;
+            let mut step = (target - start) / (4.0 + 8.0 * sampler.next_1d());
+            // Steps along an axis or in a plane, and tiny ones.
+            match i % 5 {
+                0 => step.x = 0.0,
+                1 => (step.y, step.z) = (0.0, 0.0),
+                2 => step *= 1e-6,
+                _ => {}
+            }
+            let mut along = [f32::NAN; 16];
+            grid.fluence_along(start, step, &mut along);
+            for (j, v) in along.iter().enumerate() {
+                let expected = grid.fluence(start + (j as f32 + 0.5) * step);
+                assert_eq!(*v, expected, "ray {i} from {start} by {step}, part {j}");
+                lit_parts += usize::from(*v > 0.0);
+            }
+        }
+        assert!(lit_parts > 1000, "{lit_parts} parts in the light");
     }
 
     #[test]
