@@ -116,18 +116,25 @@ pub fn log_normalization(kappa: f64) -> f64 {
 /// `u.x` picks `cos theta` by inverting the CDF; `u.y` picks the azimuth.
 #[inline]
 pub fn sample(mean: Vec3, kappa: f32, u: Vec2) -> Vec3 {
-    let b = sample_cos_minus_one(f64::from(kappa), f64::from(u.x));
-    let sin_theta = (-b * (2.0 + b)).max(0.0).sqrt() as f32;
+    let b = sample_cos_minus_one(kappa, u.x);
+    let sin_theta = (-b * (2.0 + b)).max(0.0).sqrt();
     let (sin_phi, cos_phi) = (std::f32::consts::TAU * u.y).sin_cos();
     let (t, s) = mean.any_orthonormal_pair();
-    (t * (sin_theta * cos_phi) + s * (sin_theta * sin_phi) + mean * (1.0 + b as f32)).normalize()
+    (t * (sin_theta * cos_phi) + s * (sin_theta * sin_phi) + mean * (1.0 + b)).normalize()
 }
 
 /// `cos theta - 1` of a vMF sample: `ln(1 - u + u exp(-2 kappa)) / kappa`, in `[-2, 0]`.
+/// In single precision: `expm1` and `ln_1p` keep it to a few ulps relative even where it is
+/// tiny (kappa 1e6), and the sampler runs once per guided vertex.
 #[inline]
-fn sample_cos_minus_one(kappa: f64, u: f64) -> f64 {
-    let b =
-        if kappa < KAPPA_SERIES { -2.0 * u } else { (u * (-2.0 * kappa).exp_m1()).ln_1p() / kappa };
+fn sample_cos_minus_one(kappa: f32, u: f32) -> f32 {
+    let b = if f64::from(kappa) < KAPPA_SERIES {
+        -2.0 * u
+    } else {
+        // exp(-2 kappa) is below f32's rounding of 1 long before KAPPA_LARGE.
+        let m = if f64::from(kappa) > KAPPA_LARGE { -1.0 } else { (-2.0 * kappa).exp_m1() };
+        (u * m).ln_1p() / kappa
+    };
     b.clamp(-2.0, 0.0)
 }
 
