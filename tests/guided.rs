@@ -160,8 +160,7 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
 
 /// Extra collisions for delta lights (placed by the cache's direct light, here the default:
 /// its in-scattering, a bright blob off the start of the ray) have the density they report,
-/// which integrates to 1 over the guided stretch and is zero past it; and the flight's own
-/// collision gets the balance heuristic's share against it.
+/// which integrates to 1 over the guided stretch and is zero past it.
 #[test]
 fn extra_collisions_follow_their_density_which_integrates_to_one() {
     let cases = [
@@ -205,31 +204,36 @@ fn extra_collisions_follow_their_density_which_integrates_to_one() {
     }
 }
 
-/// Guided flights at distance alpha 0 in a grey medium take the closed-form path
-/// (`guided::plain_flight`): their own collisions follow the exponential free path with the
-/// albedo as weight, their extra collisions the density `GuidedDistance` reports for them, and
-/// both weights carry the balance heuristic against that density and the flight's, as the
-/// general sampler computes them. From thin (1e-5) to dense (1e4) media, with the surface
-/// before, after or without a cut.
+/// Guided flights weigh their own collision and their extra collision for delta lights by the
+/// densities `GuidedDistance` reports, joined by the power heuristic: at distance alpha 0 in a
+/// grey medium through the closed-form path (`guided::plain_flight`, which asks the field
+/// nothing), at alpha 0.5 through the general sampler. Both collisions follow those densities
+/// (chi-square), from thin (1e-5) to dense (1e4) media, with the surface before, after or
+/// without the guided stretch's cut.
 #[test]
-fn flights_at_distance_alpha_zero_keep_the_general_samplers_densities() {
+fn guided_flights_weigh_both_collisions_by_their_densities() {
     let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
     let cases = [(0.8f32, 6.0f32), (0.8, 20.0), (0.8, f32::INFINITY), (1e-5, 6.0), (1e4, 6.0)];
-    for (sigma, t_max) in cases {
-        let what = format!("sigma {sigma}, t_max {t_max}");
+    for (alpha, (sigma, t_max)) in [0.0f32, 0.5].into_iter().flat_map(|a| cases.map(|c| (a, c))) {
+        let what = format!("alpha {alpha}, sigma {sigma}, t_max {t_max}");
         let albedo = 0.7f32;
         let medium = medium_of(&format!(
             "type = \"homogeneous\"\nsigma_t = {sigma}\nalbedo = {albedo}\nphase = {{ type = \"hg\", g = 0.5 }}"
         ));
         let cache = Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), ..Analytic::constant(1.0) };
         let general =
-            GuidedDistance::new(&medium, &ray, t_max, Spectrum::ONE, 0.0, 0.5, 1).unwrap();
+            GuidedDistance::new(&medium, &ray, t_max, Spectrum::ONE, alpha, 0.5, 1).unwrap();
         let state = RefCell::new((general, cache));
         let densities = |t: f32| {
             let (d, c) = &mut *state.borrow_mut();
             (d.pdf(t, &medium, c, &mut Counters::default()), d.direct_density(t, &medium, c))
         };
+        let pass = {
+            let (d, c) = &mut *state.borrow_mut();
+            d.pass_probability(&medium, c, &mut Counters::default())
+        };
         let close = |got: f32, expected: f32| (got - expected).abs() <= 1e-4 * expected.abs();
+        let transmittance = |t: f32| (-sigma * t).exp();
         let (mut own, mut extra) = (Vec::new(), Vec::new());
         let mut sampler = Sampler::new(13, 0, 0);
         let mut cache = state.borrow().1.clone();
@@ -240,40 +244,43 @@ fn flights_at_distance_alpha_zero_keep_the_general_samplers_densities() {
                 &ray,
                 t_max,
                 Spectrum::ONE,
-                0.0,
+                alpha,
                 true,
                 &mut cache,
                 &mut sampler,
                 counters,
             );
-            assert_eq!(f.gain, 1.0, "{what}");
+            assert!(alpha > 0.0 || f.gain == 1.0, "{what}: {f:?}");
             match f.event {
                 GuidedEvent::Scatter { t } => {
-                    assert!(close(f.weight.x, albedo) && f.weight.x == f.weight.z, "{what}: {f:?}");
                     let (p, direct) = densities(t);
-                    assert!(close(f.delta_share, p / (p + direct)), "{what}, t {t}: {f:?}");
+                    let weight = albedo * sigma * transmittance(t) / p;
+                    assert!(close(f.weight.x, weight) && f.weight.x == f.weight.z, "{what}: {f:?}");
+                    let share = p * p / (p * p + direct * direct);
+                    assert!(close(f.delta_share, share), "{what}, t {t}: {f:?}");
                     own.push(f64::from(t));
                 }
                 GuidedEvent::Pass => {
-                    assert!(f.weight == Spectrum::ONE && f.delta_share == 1.0, "{what}: {f:?}");
+                    assert!(close(f.weight.x, transmittance(t_max) / pass), "{what}: {f:?}");
+                    assert_eq!(f.delta_share, 1.0, "{what}: {f:?}");
                     own.push(-1.0);
                 }
                 GuidedEvent::Absorb => panic!("{what}: a non-emissive flight absorbed"),
             }
             let e = f.extra.expect("light along every ray's stretch");
             let (p, direct) = densities(e.t);
-            let scattering = (-sigma * e.t).exp() * sigma * albedo;
-            assert!(close(e.weight.x, scattering / (p + direct)), "{what}, t {}: {e:?}", e.t);
+            let scattering = transmittance(e.t) * sigma * albedo;
+            let expected = scattering * direct / (p * p + direct * direct);
+            assert!(close(e.weight.x, expected), "{what}, t {}: {e:?}", e.t);
             extra.push(f64::from(e.t));
         }
-        assert_eq!(counters.field_lookups, 0, "{what}");
+        assert_eq!(counters.field_lookups == 0, alpha == 0.0, "{what}");
         let pdf = |t: f64| f64::from(densities(t as f32).0);
         let direct_pdf = |t: f64| f64::from(densities(t as f32).1);
         let stretch = f64::from(t_max.min(8.0 / sigma));
-        let reach = f64::from(t_max.min(20.0 / sigma));
-        let pass = (-f64::from(sigma) * f64::from(t_max)).exp();
+        let reach = f64::from(t_max.min(40.0 / sigma));
         let edges: Vec<f64> = (0..=48).map(|i| reach * f64::from(i) / 48.0).collect();
-        chi2_1d(&own, &pdf, &edges, &[(-1.0, pass)]).assert_pass(1e-3, &what);
+        chi2_1d(&own, &pdf, &edges, &[(-1.0, f64::from(pass))]).assert_pass(1e-3, &what);
         let edges: Vec<f64> = (0..=64).map(|i| stretch * f64::from(i) / 64.0).collect();
         chi2_1d(&extra, &direct_pdf, &edges, &[]).assert_pass(1e-3, &what);
     }

