@@ -653,7 +653,12 @@ pub fn guided_flight(
     if extra_nee && !medium.is_emissive() {
         if let Some((t, direct)) = dist.sample_direct(medium, cache, sampler) {
             let own = dist.pdf(t, medium, cache, counters);
-            let weight = scattering(t) * (power_heuristic(direct, own) / direct);
+            // A density that underflowed in every channel leaves nothing to weigh (never 0/0).
+            let weight = if direct > 0.0 {
+                scattering(t) * (power_heuristic(direct, own) / direct)
+            } else {
+                Spectrum::ZERO
+            };
             extra = Some(ExtraCollision { t, weight });
         }
         if let Some(t) = t

@@ -37,7 +37,7 @@ pub(super) fn plain_flight(
     // The flight: transmittance `survive` to `t`, density `sigma survive`.
     let u = sampler.next_1d();
     let survive = 1.0 - u;
-    let t = -(-u).ln_1p() / sigma;
+    let t = -survive.ln() / sigma; // 1 - u is exact
     let collides = t < t_max;
     let mut flight =
         if collides { GuidedFlight::new(GuidedEvent::Scatter { t }, albedo, 1.0) } else { pass };
