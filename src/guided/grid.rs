@@ -160,7 +160,7 @@ impl DirectGrid {
             }
             values.push(to_bf16(v));
         }
-        let mut grid = Self { min, scale, dims, values, lit: Default::default() };
+        let mut grid = Self { min, scale, dims, values, ..Self::default() };
         grid.lit = grid.lit_box();
         Ok(grid)
     }
@@ -184,12 +184,10 @@ fn parts_within(c0: Vec3A, d: Vec3A, lo: Vec3A, hi: Vec3A, n: usize) -> (usize, 
             continue;
         }
         let (t0, t1) = ((lo[k] - c0[k]) / d[k], (hi[k] - c0[k]) / d[k]);
+        // `max` and `min` ignore NaN, so a ray of NaN leaves the whole range to the exact
+        // checks.
         a = a.max(t0.min(t1));
         b = b.min(t0.max(t1));
-    }
-    // NaN (a ray of NaN) leaves the whole range to the exact checks.
-    if a.is_nan() || b.is_nan() {
-        return (0, n);
     }
     if a > b {
         return (0, 0);
