@@ -153,7 +153,12 @@ fn full_path(c: &mut Criterion) {
         let scene = load(&format!("scenes/{name}.toml"));
         let field = trained(&scene);
         let unguided = VolPath::from_scene(&scene).settings();
-        let guided = WalkSettings { guide: Components::FULL, alpha: 0.5, ..unguided };
+        let guided = WalkSettings {
+            guide: Components::FULL,
+            alpha: 0.5,
+            surface_alpha: zerovar::render::DEFAULT_SURFACE_ALPHA,
+            ..unguided
+        };
         let mut counters = Counters::default();
         // Each strategy traces the same sequence of camera samples.
         let mut first = 0;

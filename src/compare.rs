@@ -57,7 +57,7 @@ pub enum CompareError {
 
 impl Method {
     /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
-    /// distances, rr, full or a +-list), `alpha`, `distance-alpha`, `train-passes`,
+    /// distances, rr, full or a +-list), `alpha`, `surface-alpha`, `distance-alpha`, `train-passes`,
     /// `train-time` (seconds), `tracker` (a `--tracker` name), `combine` (true, the default:
     /// training images join the result by inverse variance; false discards them, as
     /// `--training-images`), `parallax` (on, the default, or off: the field's lobes fixed per
@@ -79,6 +79,13 @@ impl Method {
             let number = || {
                 value.parse::<f64>().map_err(|_| err(format!("{key}: `{value}` is not a number")))
             };
+            let probability = || {
+                let a = number()?;
+                if !(0.0..=1.0).contains(&a) {
+                    return Err(err(format!("{key} {a} must lie in [0, 1]")));
+                }
+                Ok(a as f32)
+            };
             match key {
                 "guiding" => {
                     let (components, adaptive) = parse_guiding(value)
@@ -86,20 +93,9 @@ impl Method {
                     m.options.guiding.components = components;
                     m.options.guiding.adaptive = adaptive;
                 }
-                "alpha" => {
-                    let a = number()?;
-                    if !(0.0..=1.0).contains(&a) {
-                        return Err(err(format!("alpha {a} must lie in [0, 1]")));
-                    }
-                    m.options.guiding.alpha = a as f32;
-                }
-                "distance-alpha" => {
-                    let a = number()?;
-                    if !(0.0..=1.0).contains(&a) {
-                        return Err(err(format!("distance-alpha {a} must lie in [0, 1]")));
-                    }
-                    m.options.guiding.distance_alpha = a as f32;
-                }
+                "alpha" => m.options.guiding.alpha = probability()?,
+                "surface-alpha" => m.options.guiding.surface_alpha = probability()?,
+                "distance-alpha" => m.options.guiding.distance_alpha = probability()?,
                 "train-passes" => {
                     let n = number()?;
                     if !(1.0..=20.0).contains(&n) || n.fract() != 0.0 {
@@ -389,11 +385,12 @@ mod tests {
     fn method_options_parse_and_bad_ones_are_named() {
         let base = RenderOptions::unguided(Budget::Samples(4), 1);
         let m = Method::parse(
-            "g=guiding:full,alpha:0.7,distance-alpha:0.25,train-passes:3,combine:false",
+            "g=guiding:full,alpha:0.7,surface-alpha:0.9,distance-alpha:0.25,train-passes:3,combine:false",
             &base,
         )
         .expect("valid method");
         assert_eq!(m.options.guiding.distance_alpha, 0.25);
+        assert_eq!(m.options.guiding.surface_alpha, 0.9);
         assert!(m.options.guiding.field.parallax);
         let flat = Method::parse("f=guiding:full,parallax:off", &base).expect("valid method");
         assert!(!flat.options.guiding.field.parallax);
@@ -409,6 +406,7 @@ mod tests {
             ("g=parallax:some", "parallax: `some` is not on or off"),
             ("g=alpha:2", "alpha 2 must lie in [0, 1]"),
             ("g=distance-alpha:-1", "distance-alpha -1 must lie in [0, 1]"),
+            ("g=surface-alpha:1.5", "surface-alpha 1.5 must lie in [0, 1]"),
             ("g=speed:3", "unknown option `speed`"),
             ("g=guiding", "is not key:value"),
             ("bad name=guiding:full", "the name must be"),

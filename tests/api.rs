@@ -153,6 +153,11 @@ fn options_assembled_in_code_are_validated_before_any_work() {
         },
         {
             let mut o = good();
+            o.guiding.surface_alpha = 2.0;
+            (o, OptionsError::SurfaceAlpha(2.0))
+        },
+        {
+            let mut o = good();
             o.guiding.distance_alpha = -0.5;
             (o, OptionsError::DistanceAlpha(-0.5))
         },
@@ -178,6 +183,9 @@ fn options_assembled_in_code_are_validated_before_any_work() {
     let mut nan = good();
     nan.guiding.alpha = f32::NAN;
     assert!(matches!(nan.validate(), Err(OptionsError::Alpha(a)) if a.is_nan()));
+    let mut nan = good();
+    nan.guiding.surface_alpha = f32::NAN;
+    assert!(matches!(nan.validate(), Err(OptionsError::SurfaceAlpha(a)) if a.is_nan()));
     let mut nan = good();
     nan.guiding.distance_alpha = f32::NAN;
     assert!(matches!(nan.validate(), Err(OptionsError::DistanceAlpha(a)) if a.is_nan()));

@@ -424,8 +424,14 @@ fn analytic_cache_gives_zero_variance() {
     for albedo in [0.2f32, 0.5, 0.9] {
         let s = infinite_glow(albedo);
         let guide = Components { directions: true, distances: true, roulette: true };
-        let settings =
-            WalkSettings { max_depth: None, rr_depth: 5, guide, alpha: 0.5, distance_alpha: 0.5 };
+        let settings = WalkSettings {
+            max_depth: None,
+            rr_depth: 5,
+            guide,
+            alpha: 0.5,
+            surface_alpha: 0.5,
+            distance_alpha: 0.5,
+        };
         let mut cache = Analytic::constant(3.0);
         let mut spread = MeanEstimate::default();
         for i in 0..2000 {
@@ -477,8 +483,14 @@ radiance = 1
 "#,
     );
     let guide = Components { directions: false, distances: true, roulette: true };
-    let settings =
-        WalkSettings { max_depth: None, rr_depth: 5, guide, alpha: 0.5, distance_alpha: 0.5 };
+    let settings = WalkSettings {
+        max_depth: None,
+        rr_depth: 5,
+        guide,
+        alpha: 0.5,
+        surface_alpha: 0.5,
+        distance_alpha: 0.5,
+    };
     for scale in [1e-3f32, 1.0, 1e3] {
         let mut cache = Analytic { scale, ..Analytic::constant(1.0) };
         let mut counters = Counters::default();
@@ -605,8 +617,9 @@ type = "constant"
 radiance = 0.2
 "#;
 
+/// A render at `alpha` in media and at surfaces alike.
 fn render_with(s: &Scene, components: Components, alpha: f32, spp: u32, seed: u64) -> Film {
-    render_adaptive(s, components, alpha, spp, seed, false).film
+    render_adaptive(s, components, (alpha, alpha), spp, seed, false).film
 }
 
 /// At distance alpha 0 (the default) guided flights ask the field nothing: every lookup is a
@@ -636,7 +649,7 @@ fn flights_at_distance_alpha_zero_pay_for_no_field_lookup() {
 fn render_adaptive(
     s: &Scene,
     components: Components,
-    alpha: f32,
+    (alpha, surface_alpha): (f32, f32),
     spp: u32,
     seed: u64,
     adaptive: bool,
@@ -646,6 +659,7 @@ fn render_adaptive(
     let guiding = GuidingOptions {
         components,
         alpha,
+        surface_alpha,
         distance_alpha: alpha,
         train: TrainBudget::Passes(4),
         adaptive,
@@ -695,15 +709,17 @@ fn every_guided_component_converges_to_the_unguided_image() {
             ("rr", Components { roulette: true, ..Components::OFF }),
             ("full", Components::FULL),
         ];
+        // Media and surfaces (the fog's and the dye's floor) each at 0.1, 0.5 and 1, the two
+        // apart where they can be.
         for (what, c) in sets {
-            for alpha in [0.1f32, 0.5, 1.0] {
-                let q = quadrant_means(&render_with(&s, c, alpha, 256, 7));
+            for alphas in [(0.1f32, 1.0f32), (0.5, 0.5), (1.0, 0.1)] {
+                let q = quadrant_means(&render_adaptive(&s, c, alphas, 256, 7, false).film);
                 for (k, (g, r)) in q.iter().zip(&reference).enumerate() {
                     let zk = z_score(g, r);
                     worst = worst.max(zk.abs());
                     assert!(
                         zk.abs() < 4.5,
-                        "{name}, {what}, alpha {alpha}, quadrant {k}: {} vs unguided {} (z = {zk:.2})",
+                        "{name}, {what}, alphas {alphas:?}, quadrant {k}: {} vs unguided {} (z = {zk:.2})",
                         g.mean,
                         r.mean
                     );
@@ -785,7 +801,7 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
         for requested in [Components::FULL, without_roulette, Components::ROULETTE] {
-            let r = render_adaptive(&s, requested, 0.5, 256, 7, true);
+            let r = render_adaptive(&s, requested, (0.5, 0.5), 256, 7, true);
             let selection = r.selection.expect("adaptive guiding reports its choice");
             let what = format!("{name}, adaptive {} against unguided", selection.components);
             assert_quadrants_agree(quadrant_means(&r.film), reference, 4.5, &what);
@@ -920,6 +936,7 @@ fn training_continuations_learn_the_light_found_by_later_next_event_estimates() 
         rr_depth: 5,
         guide: Components::OFF,
         alpha: 0.5,
+        surface_alpha: 0.5,
         distance_alpha: 0.5,
     };
     let mut recorder = PathRecorder::new();
@@ -997,8 +1014,14 @@ fn guided_directions_without_windows_stop_compounding_their_weights() {
     // before roulette) by more than MAX_GUIDED_GAIN / (1 - MAX_ALPHA), and the mean stays L_e.
     let s = infinite_glow(0.95);
     let guide = Components { directions: true, ..Components::OFF };
-    let settings =
-        WalkSettings { max_depth: None, rr_depth: 1000, guide, alpha: 1.0, distance_alpha: 1.0 };
+    let settings = WalkSettings {
+        max_depth: None,
+        rr_depth: 1000,
+        guide,
+        alpha: 1.0,
+        surface_alpha: 1.0,
+        distance_alpha: 1.0,
+    };
     let mut cache = Cone { cos_max: 0.95 };
     let mut estimate = MeanEstimate::default();
     let mut largest = 0.0f32;

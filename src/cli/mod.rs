@@ -81,7 +81,7 @@ struct CompareArgs {
     reference: PathBuf,
     #[command(flatten)]
     budget: BudgetArgs,
-    /// A method: NAME=key:value,... with keys guiding, alpha, distance-alpha, train-passes,
+    /// A method: NAME=key:value,... with keys guiding, alpha, surface-alpha, distance-alpha, train-passes,
     /// train-time, tracker, combine, parallax (repeatable) [default: unguided and
     /// guided=guiding:full].
     #[arg(long, value_name = "NAME=OPTIONS")]
@@ -112,10 +112,13 @@ struct GuidingArgs {
     /// with --field].
     #[arg(long, value_name = "MODE")]
     guiding: Option<String>,
-    /// Probability of the guided strategy in each mixture with standard sampling, in [0, 1]
-    /// (used up to 0.8: standard sampling always keeps 20%, which bounds every weight).
+    /// Probability of the guided strategy in each mixture with standard sampling in media, in
+    /// [0, 1] (used up to 0.8: standard sampling always keeps 20%, which bounds every weight).
     #[arg(long, default_value_t = 0.5)]
     alpha: f32,
+    /// The same at surfaces, in [0, 1] (used up to 0.8).
+    #[arg(long, default_value_t = zerovar::render::DEFAULT_SURFACE_ALPHA)]
+    surface_alpha: f32,
     /// Probability of the zero-variance collision density in guided flights' mixture with
     /// standard tracking, in [0, 1] (used up to 0.8). Guided flights take extra collisions for
     /// delta lights whatever it is; the default 0 spares each flight a field lookup, which at
@@ -447,6 +450,9 @@ fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingO
     if !(0.0..=1.0).contains(&a.alpha) {
         bail!("--alpha {}: give a probability in [0, 1]", a.alpha);
     }
+    if !(0.0..=1.0).contains(&a.surface_alpha) {
+        bail!("--surface-alpha {}: give a probability in [0, 1]", a.surface_alpha);
+    }
     if !(0.0..=1.0).contains(&a.distance_alpha) {
         bail!("--distance-alpha {}: give a probability in [0, 1]", a.distance_alpha);
     }
@@ -467,6 +473,7 @@ fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingO
     Ok(GuidingOptions {
         components,
         alpha: a.alpha,
+        surface_alpha: a.surface_alpha,
         distance_alpha: a.distance_alpha,
         train,
         adaptive,

@@ -37,6 +37,7 @@ impl VolPath {
             rr_depth: self.rr_depth,
             guide: Components::OFF,
             alpha: 0.0,
+            surface_alpha: 0.0,
             distance_alpha: 0.0,
         }
     }

@@ -66,8 +66,11 @@ pub struct WalkSettings {
     pub rr_depth: u32,
     /// Which decisions are guided.
     pub guide: Components,
-    /// Probability of the guided strategy in each mixture, in [0, 1].
+    /// Probability of the guided strategy in each mixture in media, in [0, 1].
     pub alpha: f32,
+    /// Probability of the guided strategy in each mixture at surfaces, in [0, 1]
+    /// (`render::DEFAULT_SURFACE_ALPHA`); limited like `alpha`.
+    pub surface_alpha: f32,
     /// Probability of the zero-variance collision density in guided flights, in [0, 1]
     /// (`render::DEFAULT_DISTANCE_ALPHA`); limited like `alpha`, and zero wherever `alpha`
     /// has stopped guiding the path.
@@ -161,11 +164,8 @@ fn walk<C: RadianceCache>(
         // Guided decisions mix with standard sampling at `alpha`; without weight windows to
         // split heavy paths, only until they have compounded the path's weight past
         // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.
-        let alpha = if window_rr || s.guided_gain < MAX_GUIDED_GAIN {
-            settings.alpha.min(MAX_ALPHA)
-        } else {
-            0.0
-        };
+        let guiding = window_rr || s.guided_gain < MAX_GUIDED_GAIN;
+        let alpha = if guiding { settings.alpha.min(MAX_ALPHA) } else { 0.0 };
         if let Some(m) = s.medium {
             let mi = m as usize;
             let medium = &scene.media[mi];
@@ -357,6 +357,7 @@ fn walk<C: RadianceCache>(
         let smooth = bsdf.has_smooth_component();
         let loaded = smooth && guide.any() && ctx.cache.load(hit.p, sampler.next_1d());
         counters.field_lookups += u64::from(loaded);
+        let alpha = if guiding { settings.surface_alpha.min(MAX_ALPHA) } else { 0.0 };
         let product = guide.directions && alpha > 0.0 && loaded && ctx.cache.product_cosine(hit.ns);
         let mix_pdf = |cache: &C, wi: Vec3A| {
             let pb = bsdf.pdf(wo, frame.to_local(wi));
