@@ -149,7 +149,8 @@ impl DirectGrid {
         }
         if n > MAX_CELLS || !(min.is_finite() && scale.is_finite() && scale > 0.0) {
             return Err(GuidingError::Decode(format!(
-                "the direct-light grid (corner {min}, {scale} cells per unit, {dims} cells) is not                  one `zerovar train` writes"
+                "the direct-light grid (corner {min}, {scale} cells per unit, {dims} cells) is not \
+                 one `zerovar train` writes"
             )));
         }
         let mut values = Vec::with_capacity(n as usize);
