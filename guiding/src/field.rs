@@ -255,15 +255,25 @@ impl Field {
     pub fn update(&mut self, samples: &[Sample]) -> Result<(), GuidingError> {
         let start = Instant::now();
         validate_all(samples)?;
-        let accepted = samples.iter().enumerate().filter(|(_, s)| match self.config.samples {
-            SampleKind::All => true,
-            SampleKind::Volume => s.volume,
-            SampleKind::Surface => !s.volume,
-        });
+        let kind = self.config.samples;
+        let tree = &self.tree;
+        // The tree lookups in parallel (a pass holds millions of samples), the lists filled
+        // in sample order.
+        let leaves: Vec<u32> = samples
+            .par_iter()
+            .map(|s| {
+                let accepted = match kind {
+                    SampleKind::All => true,
+                    SampleKind::Volume => s.volume,
+                    SampleKind::Surface => !s.volume,
+                };
+                if accepted { tree.lookup(s.position).0 as u32 } else { u32::MAX }
+            })
+            .collect();
         let mut lists: Vec<Vec<u32>> = vec![Vec::new(); self.regions.len()];
         let mut accepted_count = 0u64;
-        for (i, s) in accepted {
-            lists[self.tree.lookup(s.position).0].push(i as u32);
+        for (i, &leaf) in leaves.iter().enumerate().filter(|(_, l)| **l != u32::MAX) {
+            lists[leaf as usize].push(i as u32);
             accepted_count += 1;
         }
         self.refine(samples, &mut lists);

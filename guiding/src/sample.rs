@@ -64,8 +64,13 @@ impl Sample {
 
 /// Validates a batch, naming the first bad sample.
 pub(crate) fn validate_all(samples: &[Sample]) -> Result<(), GuidingError> {
-    for (index, s) in samples.iter().enumerate() {
-        s.validate().map_err(|reason| GuidingError::InvalidSample { index, reason })?;
+    use rayon::prelude::*;
+    // In parallel, and still the first invalid sample whatever the thread count.
+    match samples.par_iter().position_first(|s| s.validate().is_err()) {
+        Some(index) => Err(GuidingError::InvalidSample {
+            index,
+            reason: samples[index].validate().expect_err("found invalid"),
+        }),
+        None => Ok(()),
     }
-    Ok(())
 }

@@ -252,15 +252,28 @@ pub struct DirectFluence {
 impl DirectFluence {
     /// The mean of `records` per region of `field`, and their fluence-weighted mean direction.
     pub fn build(field: &Field, records: &[DirectRecord]) -> Self {
+        use rayon::prelude::*;
+        // The grid beside the regions, and the regions' lookups in parallel; the sums stay in
+        // record order, so the result does not depend on the thread count.
+        let (regions, grid) = rayon::join(
+            || {
+                records
+                    .par_iter()
+                    .map(|r| {
+                        field.lookup_index(r.position.into(), 0.5).map_or(u32::MAX, |i| i as u32)
+                    })
+                    .collect::<Vec<u32>>()
+            },
+            || DirectGrid::build(records),
+        );
         let n = field.regions().len();
         let (mut sums, mut counts) = (vec![0.0f64; n], vec![0u64; n]);
         let mut moments = vec![glam::DVec3::ZERO; n];
-        for r in records {
-            if let Some(i) = field.lookup_index(r.position.into(), 0.5) {
-                sums[i] += f64::from(r.fluence);
-                moments[i] += r.direction.as_dvec3() * f64::from(r.fluence);
-                counts[i] += 1;
-            }
+        for (r, &i) in records.iter().zip(&regions).filter(|(_, i)| **i != u32::MAX) {
+            let i = i as usize;
+            sums[i] += f64::from(r.fluence);
+            moments[i] += r.direction.as_dvec3() * f64::from(r.fluence);
+            counts[i] += 1;
         }
         let values = sums
             .iter()
@@ -276,7 +289,7 @@ impl DirectFluence {
                 if a.length_squared() > 1.0 { a.normalize() } else { a }
             })
             .collect();
-        Self { values, axes, grid: DirectGrid::build(records) }
+        Self { values, axes, grid }
     }
 
     /// The direct fluence of region `index` (zero when unknown).

@@ -175,6 +175,13 @@ fn invalid_samples_are_rejected_with_their_index() {
         }
         assert!(err.to_string().contains("sample 7"));
     }
+    // Checked in parallel, the first invalid sample is still the one named.
+    let mut big = clustered_batch(2, 100_000);
+    for i in [99_000, 70_001, 70_000] {
+        big[i].pdf = -1.0;
+    }
+    let err = field.update(&big).unwrap_err();
+    assert!(matches!(err, GuidingError::InvalidSample { index: 70_000, .. }), "{err}");
     // Nothing was learned from the rejected batches.
     assert_eq!(field.iterations(), 0);
     assert!(!field.is_trained());
