@@ -417,6 +417,18 @@ emission = 3
     ))
 }
 
+/// Walk settings guiding `guide` at alpha 0.5 everywhere, standard roulette from depth 5.
+fn half_guided(guide: Components) -> WalkSettings {
+    WalkSettings {
+        max_depth: None,
+        rr_depth: 5,
+        guide,
+        alpha: 0.5,
+        surface_alpha: 0.5,
+        distance_alpha: 0.5,
+    }
+}
+
 #[test]
 fn analytic_cache_gives_zero_variance() {
     // In an infinite homogeneous emitting medium L = L_e everywhere; with L_i = L_s = L_e as
@@ -424,14 +436,7 @@ fn analytic_cache_gives_zero_variance() {
     for albedo in [0.2f32, 0.5, 0.9] {
         let s = infinite_glow(albedo);
         let guide = Components { directions: true, distances: true, roulette: true };
-        let settings = WalkSettings {
-            max_depth: None,
-            rr_depth: 5,
-            guide,
-            alpha: 0.5,
-            surface_alpha: 0.5,
-            distance_alpha: 0.5,
-        };
+        let settings = half_guided(guide);
         let mut cache = Analytic::constant(3.0);
         let mut spread = MeanEstimate::default();
         for i in 0..2000 {
@@ -483,14 +488,7 @@ radiance = 1
 "#,
     );
     let guide = Components { directions: false, distances: true, roulette: true };
-    let settings = WalkSettings {
-        max_depth: None,
-        rr_depth: 5,
-        guide,
-        alpha: 0.5,
-        surface_alpha: 0.5,
-        distance_alpha: 0.5,
-    };
+    let settings = half_guided(guide);
     for scale in [1e-3f32, 1.0, 1e3] {
         let mut cache = Analytic { scale, ..Analytic::constant(1.0) };
         let mut counters = Counters::default();
@@ -931,14 +929,7 @@ fn training_continuations_learn_the_light_found_by_later_next_event_estimates() 
     // that next-event estimation already samples perfectly), and every direction it guided
     // was wasted.
     let s = scene(FOG);
-    let settings = WalkSettings {
-        max_depth: None,
-        rr_depth: 5,
-        guide: Components::OFF,
-        alpha: 0.5,
-        surface_alpha: 0.5,
-        distance_alpha: 0.5,
-    };
+    let settings = half_guided(Components::OFF);
     let mut recorder = PathRecorder::new();
     let mut samples = Vec::new();
     for i in 0..4000 {

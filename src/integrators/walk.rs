@@ -357,6 +357,7 @@ fn walk<C: RadianceCache>(
         let smooth = bsdf.has_smooth_component();
         let loaded = smooth && guide.any() && ctx.cache.load(hit.p, sampler.next_1d());
         counters.field_lookups += u64::from(loaded);
+        // Surfaces have a share of their own (`render::DEFAULT_SURFACE_ALPHA`).
         let alpha = if guiding { settings.surface_alpha.min(MAX_ALPHA) } else { 0.0 };
         let product = guide.directions && alpha > 0.0 && loaded && ctx.cache.product_cosine(hit.ns);
         let mix_pdf = |cache: &C, wi: Vec3A| {
