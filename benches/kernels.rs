@@ -141,7 +141,7 @@ fn paths<C: RadianceCache>(
     for i in first..first + BATCH {
         let mut s = Sampler::new(4, 0, i);
         let ray = camera_ray(scene, &mut s);
-        let mut ctx = WalkContext { cache: &mut *cache, pixel: None, recorder: None };
+        let mut ctx = WalkContext { cache: &mut *cache, pixel: None, recorder: None, trace: None };
         sum += radiance(settings, scene, ray, scene.camera_medium(), &mut ctx, &mut s, counters).x;
     }
     sum

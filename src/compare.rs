@@ -105,6 +105,15 @@ impl Method {
                     }
                     m.options.guiding.train = TrainBudget::Passes(n as u32);
                 }
+                "train-share" => {
+                    let f = number()?;
+                    if !(f > 0.0 && f < 1.0) {
+                        return Err(err(format!(
+                            "train-share {f} must be a fraction of the budget above 0 and below 1"
+                        )));
+                    }
+                    m.options.guiding.train = TrainBudget::Share(f as f32);
+                }
                 "train-time" => {
                     let t = number()?;
                     if !(t > 0.0 && t < 1e7) {
@@ -133,7 +142,7 @@ impl Method {
                 }
                 _ => {
                     return Err(err(format!(
-                        "unknown option `{key}`; use guiding, alpha, distance-alpha, train-passes, train-time, tracker, combine or parallax"
+                        "unknown option `{key}`; use guiding, alpha, surface-alpha, distance-alpha, train-share, train-passes, train-time, tracker, combine or parallax"
                     )));
                 }
             }
@@ -279,23 +288,15 @@ pub fn run(
     Ok(results)
 }
 
-/// The budget for a checkpoint; a time budget includes a guided method's training, which
-/// gets a quarter of it unless the method says otherwise.
+/// The budget for a checkpoint: `fraction` of the comparison's, and of a method's explicit
+/// training time (a share of the budget scales with it by itself).
 fn scaled(budget: Budget, fraction: f64, options: &mut RenderOptions) -> Budget {
+    if let TrainBudget::Time(tt) = options.guiding.train {
+        options.guiding.train = TrainBudget::Time(tt.mul_f64(fraction));
+    }
     match budget {
         Budget::Samples(n) => Budget::Samples(((n as f64 * fraction).round() as u32).max(1)),
-        Budget::Time(t) => {
-            let total = t.as_secs_f64() * fraction;
-            if !options.guiding.components.any() {
-                return Budget::Time(Duration::from_secs_f64(total));
-            }
-            let train = match options.guiding.train {
-                TrainBudget::Time(tt) => tt.as_secs_f64() * fraction,
-                TrainBudget::Passes(_) => total / 4.0,
-            };
-            options.guiding.train = TrainBudget::Time(Duration::from_secs_f64(train));
-            Budget::Time(Duration::from_secs_f64((total - train).max(total * 0.05)))
-        }
+        Budget::Time(t) => Budget::Time(t.mul_f64(fraction)),
     }
 }
 

@@ -84,6 +84,9 @@ pub struct RenderStats {
     /// Adaptive guiding: which tiles the pilot chose to guide.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub selection: Option<crate::render::Selection>,
+    /// The firefly diagnostic: the largest samples and their paths.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fireflies: Option<crate::render::FireflyReport>,
     /// Density lookups per path made by guided flights (included in the total above).
     pub guided_density_lookups_per_path: f64,
     /// Guiding-field queries per path.
@@ -113,6 +116,10 @@ pub struct TrainingStats {
     pub lobes: usize,
     /// Memory of the field in bytes.
     pub memory_bytes: usize,
+    /// Training's share of the whole render's seconds.
+    pub share: f64,
+    /// Why training stopped.
+    pub stop: crate::render::TrainingStop,
 }
 
 impl RenderStats {
@@ -134,6 +141,7 @@ impl RenderStats {
             splitting_factor: if c.paths > 0 { c.walks as f64 / c.paths as f64 } else { 1.0 },
             training: None,
             selection: None,
+            fireflies: None,
             guided_density_lookups_per_path: per_path(c.guided_density_lookups),
             field_lookups_per_path: per_path(c.field_lookups),
             products_per_path: per_path(c.products),

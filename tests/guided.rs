@@ -85,6 +85,10 @@ impl RadianceCache for Analytic {
     }
 }
 
+/// The scenes every guided estimator must converge on.
+const SCENES: [(&str, &str); 4] =
+    [("chromatic", CHROMATIC), ("fog", FOG), ("spot in fog", SPOT_FOG), ("cloud", CLOUD)];
+
 fn medium_of(text: &str) -> Medium {
     let s = scene(&format!(
         "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 30\nresolution = [4, 4]\n\n[media.m]\n{text}\n\n[[lights]]\ntype = \"constant\"\nradiance = 1\n"
@@ -158,6 +162,11 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
     }
 }
 
+/// A point light for equiangular extra collisions.
+fn point(position: Vec3A) -> zerovar::guided::PointLight {
+    zerovar::guided::PointLight { position, cone: None }
+}
+
 /// Extra collisions for delta lights (placed by the cache's direct light, here the default:
 /// its in-scattering, a bright blob off the start of the ray) have the density they report,
 /// which integrates to 1 over the guided stretch and is zero past it.
@@ -169,21 +178,29 @@ fn extra_collisions_follow_their_density_which_integrates_to_one() {
         // A stretch cut at 8 / 0.8 = 10, before the surface at 20: nothing past the cut.
         ("type = \"homogeneous\"\nsigma_t = 0.8\nalbedo = 0.7", 20.0, 10.0),
     ];
-    for (text, t_max, stretch) in cases {
+    // Without point lights, and aiming at one just off the ray (equiangular) and one behind
+    // its start.
+    let lights =
+        [vec![], vec![point(Vec3A::new(1.3, 3.05, 3.0)), point(Vec3A::new(-2.0, 4.0, 3.0))]];
+    for ((text, t_max, stretch), points) in
+        cases.iter().flat_map(|c| lights.iter().map(move |l| (*c, l)))
+    {
         let medium = medium_of(text);
         let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
         let cache = Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), ..Analytic::constant(1.0) };
         let pick = Vec3A::new(0.2, 0.5, 0.3);
-        let state = RefCell::new((
-            GuidedDistance::new(&medium, &ray, t_max, pick, 0.5, 0.5, MAX_SEGMENTS).unwrap(),
-            cache,
-        ));
+        let mut distance =
+            GuidedDistance::new(&medium, &ray, t_max, pick, 0.5, 0.5, MAX_SEGMENTS).unwrap();
+        distance.aim_at(points);
+        let text = &format!("{text}, {} point lights", points.len());
+        let state = RefCell::new((distance, cache));
         let pdf = |t: f64| {
             let (d, c) = &mut *state.borrow_mut();
             d.direct_density(t as f32, &medium, c) as f64
         };
-        // Parts are 1 / 16 of the stretch; bins and pieces align with them.
-        let total = integrate_1d(&pdf, 0.0, stretch as f64, 128);
+        // Parts are 1 / 16 of the stretch; pieces align with them, fine enough for the
+        // equiangular peak.
+        let total = integrate_1d(&pdf, 0.0, stretch as f64, 4096);
         assert!((total - 1.0).abs() < 1e-4, "{text}: density integrates to {total}");
         if t_max > stretch {
             assert_eq!(integrate_1d(&pdf, stretch as f64, t_max as f64, 16), 0.0, "{text}");
@@ -199,7 +216,13 @@ fn extra_collisions_follow_their_density_which_integrates_to_one() {
                 t as f64
             })
             .collect();
-        let edges: Vec<f64> = (0..=64).map(|i| stretch as f64 * i as f64 / 64.0).collect();
+        // Equal bins, refined where the equiangular density peaks (about 1.3).
+        let mut edges: Vec<f64> = (0..=64).map(|i| stretch as f64 * i as f64 / 64.0).collect();
+        if !points.is_empty() {
+            edges.extend((1..40).map(|i| 1.1 + 0.4 * f64::from(i) / 40.0));
+            edges.sort_by(f64::total_cmp);
+            edges.dedup();
+        }
         chi2_1d(&samples, &pdf, &edges, &[]).assert_pass(1e-3, text);
     }
 }
@@ -214,15 +237,23 @@ fn extra_collisions_follow_their_density_which_integrates_to_one() {
 fn guided_flights_weigh_both_collisions_by_their_densities() {
     let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
     let cases = [(0.8f32, 6.0f32), (0.8, 20.0), (0.8, f32::INFINITY), (1e-5, 6.0), (1e4, 6.0)];
-    for (alpha, (sigma, t_max)) in [0.0f32, 0.5].into_iter().flat_map(|a| cases.map(|c| (a, c))) {
-        let what = format!("alpha {alpha}, sigma {sigma}, t_max {t_max}");
+    // Without point lights, and with one beside the ray (equiangular extra collisions).
+    let lights = [vec![], vec![point(Vec3A::new(1.0, 3.2, 3.0))]];
+    let runs = [0.0f32, 0.5]
+        .into_iter()
+        .flat_map(|a| cases.map(|c| (a, c)))
+        .flat_map(|run| lights.iter().map(move |l| (run, l)));
+    for ((alpha, (sigma, t_max)), points) in runs {
+        let what =
+            format!("alpha {alpha}, sigma {sigma}, t_max {t_max}, {} point lights", points.len());
         let albedo = 0.7f32;
         let medium = medium_of(&format!(
             "type = \"homogeneous\"\nsigma_t = {sigma}\nalbedo = {albedo}\nphase = {{ type = \"hg\", g = 0.5 }}"
         ));
         let cache = Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), ..Analytic::constant(1.0) };
-        let general =
+        let mut general =
             GuidedDistance::new(&medium, &ray, t_max, Spectrum::ONE, alpha, 0.5, 1).unwrap();
+        general.aim_at(points);
         let state = RefCell::new((general, cache));
         let densities = |t: f32| {
             let (d, c) = &mut *state.borrow_mut();
@@ -245,7 +276,7 @@ fn guided_flights_weigh_both_collisions_by_their_densities() {
                 t_max,
                 Spectrum::ONE,
                 alpha,
-                true,
+                Some(points),
                 &mut cache,
                 &mut sampler,
                 counters,
@@ -281,7 +312,13 @@ fn guided_flights_weigh_both_collisions_by_their_densities() {
         let reach = f64::from(t_max.min(40.0 / sigma));
         let edges: Vec<f64> = (0..=48).map(|i| reach * f64::from(i) / 48.0).collect();
         chi2_1d(&own, &pdf, &edges, &[(-1.0, f64::from(pass))]).assert_pass(1e-3, &what);
-        let edges: Vec<f64> = (0..=64).map(|i| stretch * f64::from(i) / 64.0).collect();
+        let mut edges: Vec<f64> = (0..=64).map(|i| stretch * f64::from(i) / 64.0).collect();
+        if !points.is_empty() {
+            // Finer bins where the equiangular density peaks, at t = 1 (0.2 off the ray).
+            edges.extend((1..32).map(|i| 0.6 + 0.8 * f64::from(i) / 32.0).filter(|&t| t < stretch));
+            edges.sort_by(f64::total_cmp);
+            edges.dedup();
+        }
         chi2_1d(&extra, &direct_pdf, &edges, &[]).assert_pass(1e-3, &what);
     }
 }
@@ -356,7 +393,7 @@ fn null_collision_guided_weights_stay_bounded_and_unbiased() {
                 t_max,
                 Vec3A::ONE,
                 alpha,
-                false,
+                None,
                 &mut cache,
                 &mut sampler,
                 &mut counters,
@@ -440,7 +477,8 @@ fn analytic_cache_gives_zero_variance() {
         let mut cache = Analytic::constant(3.0);
         let mut spread = MeanEstimate::default();
         for i in 0..2000 {
-            let mut ctx = WalkContext { cache: &mut cache, pixel: Some(3.0), recorder: None };
+            let mut ctx =
+                WalkContext { cache: &mut cache, pixel: Some(3.0), recorder: None, trace: None };
             let l = camera_sample(&settings, &s, &mut ctx, 1, i, &mut Counters::default());
             for c in l.to_array() {
                 assert!((c - 3.0).abs() < 1e-4, "albedo {albedo}: sample {i} returned {l}");
@@ -452,7 +490,8 @@ fn analytic_cache_gives_zero_variance() {
         let unguided = WalkSettings { guide: Components::OFF, ..settings };
         let mut other = MeanEstimate::default();
         for i in 0..2000 {
-            let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None };
+            let mut ctx =
+                WalkContext { cache: &mut cache, pixel: None, recorder: None, trace: None };
             let l = camera_sample(&unguided, &s, &mut ctx, 1, i, &mut Counters::default());
             other.push(l.x as f64);
         }
@@ -496,7 +535,8 @@ radiance = 1
         let n = 20_000;
         for i in 0..n {
             let walks_before = counters.walks;
-            let mut ctx = WalkContext { cache: &mut cache, pixel: Some(1.0), recorder: None };
+            let mut ctx =
+                WalkContext { cache: &mut cache, pixel: Some(1.0), recorder: None, trace: None };
             let l = camera_sample(&settings, &s, &mut ctx, 2, i, &mut counters);
             assert!(l.is_finite(), "cache x{scale}: sample {i} is {l}");
             let made = counters.walks - walks_before;
@@ -539,6 +579,45 @@ transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 4 }]
 type = "point"
 position = [1.5, 2.5, 1]
 intensity = 15
+"#;
+
+/// The camera and a spot light in fog filling a closed room: extra collisions aim at the light
+/// (equiangular) and directions at its glow (`guided::halo`). A little clear air around the
+/// light keeps unguided next-event estimates (`1 / r^2` from a vertex at distance `r`) of
+/// finite variance, so that the unguided reference's standard error means something.
+const SPOT_FOG: &str = r#"
+[camera]
+origin = [0, 1, 1.8]
+target = [0, 0.6, -1]
+fov = 60
+resolution = [12, 10]
+medium = "fog"
+
+[media.fog]
+type = "homogeneous"
+sigma_t = 0.4
+albedo = 0.9
+phase = { type = "hg", g = 0.3 }
+
+[[shapes]]
+type = "cube"
+transform = [{ scale = [1.5, 1, 2] }, { translate = [0, 1, 0] }]
+flip_normals = true
+bsdf = { type = "diffuse", reflectance = [0.6, 0.5, 0.4] }
+
+[[shapes]]
+type = "sphere"
+center = [0.3, 1.8, -0.6]
+radius = 0.15
+bsdf = { type = "null" }
+exterior = "fog"
+
+[[lights]]
+type = "spot"
+position = [0.3, 1.8, -0.6]
+target = [0, 0, -1]
+intensity = 4
+cutoff_angle = 25
 "#;
 
 const CLOUD: &str = r#"
@@ -633,7 +712,13 @@ fn flights_at_distance_alpha_zero_pay_for_no_field_lookup() {
             train: TrainBudget::Passes(3),
             ..GuidingOptions::default()
         };
-        let options = RenderOptions { budget: Budget::Samples(8), seed: 2, threads: None, guiding };
+        let options = RenderOptions {
+            budget: Budget::Samples(8),
+            seed: 2,
+            threads: None,
+            guiding,
+            fireflies: 0,
+        };
         render(&s, &options, &|_, _| true).unwrap().counters
     };
     for (distance_alpha, flights_look_up) in [(0.0, false), (0.5, true)] {
@@ -663,7 +748,8 @@ fn render_adaptive(
         adaptive,
         ..GuidingOptions::default()
     };
-    let options = RenderOptions { budget: Budget::Samples(spp), seed, threads: None, guiding };
+    let options =
+        RenderOptions { budget: Budget::Samples(spp), seed, threads: None, guiding, fireflies: 0 };
     let r = render(s, &options, &|_, _| true).unwrap();
     assert_eq!(r.counters.invalid_samples, 0);
     r
@@ -692,7 +778,7 @@ fn guided_renders_do_not_depend_on_the_scenes_units() {
 #[test]
 fn every_guided_component_converges_to_the_unguided_image() {
     let mut worst = 0.0f64;
-    for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
+    for (name, text) in SCENES {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
         let sets = [
@@ -733,7 +819,7 @@ fn training_images_combined_by_inverse_variance_converge_to_the_unguided_image()
     // One weight per image, estimated from the images themselves: the combined image is
     // checked over independent renders, each quadrant's mean luminance over 16 seeds against
     // the unguided reference, the spread over seeds giving the standard error.
-    for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
+    for (name, text) in SCENES {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
         let [w, h] = s.camera().resolution().map(|v| v as usize);
@@ -746,8 +832,13 @@ fn training_images_combined_by_inverse_variance_converge_to_the_unguided_image()
                 combine_training: true,
                 ..GuidingOptions::default()
             };
-            let options =
-                RenderOptions { budget: Budget::Samples(16), seed, threads: None, guiding };
+            let options = RenderOptions {
+                budget: Budget::Samples(16),
+                seed,
+                threads: None,
+                guiding,
+                fireflies: 0,
+            };
             let r = render(&s, &options, &|_, _| true).unwrap();
             let own = r.film.image();
             moved = moved
@@ -795,7 +886,7 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
     // roulette alone, are the only candidate (so both kinds of guided tiles are rendered
     // whatever the pilots choose).
     let without_roulette = Components { roulette: false, ..Components::FULL };
-    for (name, text) in [("chromatic", CHROMATIC), ("fog", FOG), ("cloud", CLOUD)] {
+    for (name, text) in SCENES {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
         for requested in [Components::FULL, without_roulette, Components::ROULETTE] {
@@ -860,7 +951,13 @@ radiance = 1
         adaptive: true,
         ..GuidingOptions::default()
     };
-    let options = RenderOptions { budget: Budget::Samples(16), seed: 3, threads: None, guiding };
+    let options = RenderOptions {
+        budget: Budget::Samples(16),
+        seed: 3,
+        threads: None,
+        guiding,
+        fireflies: 0,
+    };
     let auto = render(&s, &options, &|_, _| true).unwrap();
     let selection = auto.selection.expect("adaptive guiding reports its choice");
     assert!(selection.stopped_training, "training went on: gain {}", selection.gain);
@@ -907,8 +1004,13 @@ fn a_loaded_field_with_windows_on_the_image_so_far_converges_to_the_unguided_ima
             train: TrainBudget::Passes(4),
             ..GuidingOptions::default()
         };
-        let options =
-            RenderOptions { budget: Budget::Samples(256), seed: 7, threads: None, guiding };
+        let options = RenderOptions {
+            budget: Budget::Samples(256),
+            seed: 7,
+            threads: None,
+            guiding,
+            fireflies: 0,
+        };
         let (trained, _) = zerovar::render::train(&s, &options, &|_, _| true).unwrap();
         // Without the direct-fluence table too, as a bare guiding-crate field loads.
         for trained in [trained.clone(), TrainedField { direct: None, ..trained }] {
@@ -933,8 +1035,12 @@ fn training_continuations_learn_the_light_found_by_later_next_event_estimates() 
     let mut recorder = PathRecorder::new();
     let mut samples = Vec::new();
     for i in 0..4000 {
-        let mut ctx =
-            WalkContext { cache: &mut NoCache, pixel: None, recorder: Some(&mut recorder) };
+        let mut ctx = WalkContext {
+            cache: &mut NoCache,
+            pixel: None,
+            recorder: Some(&mut recorder),
+            trace: None,
+        };
         let l = camera_sample(&settings, &s, &mut ctx, 3, i, &mut Counters::default());
         assert!(l.is_finite());
         recorder.finish(&mut samples);
@@ -1017,7 +1123,7 @@ fn guided_directions_without_windows_stop_compounding_their_weights() {
     let mut estimate = MeanEstimate::default();
     let mut largest = 0.0f32;
     for i in 0..40_000 {
-        let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None };
+        let mut ctx = WalkContext { cache: &mut cache, pixel: None, recorder: None, trace: None };
         let l = camera_sample(&settings, &s, &mut ctx, 5, i, &mut Counters::default());
         largest = largest.max(l.max_element());
         estimate.push(f64::from(l.x));
@@ -1025,4 +1131,89 @@ fn guided_directions_without_windows_stop_compounding_their_weights() {
     let bound = 3.0 * walk::MAX_GUIDED_GAIN / (1.0 - walk::MAX_ALPHA);
     assert!(largest <= bound, "a sample of {largest}, above {bound}");
     estimate.assert_matches(3.0, 4.5, "guided directions in the glow");
+}
+
+/// A guided flight's two estimates of a delta light's single scattering along its ray (its
+/// own collision's share and the extra collision's, which may aim at the light by
+/// equiangular sampling) add up to the right answer: against quadrature, for a point light
+/// and a spot light whose cone the ray crosses, with the direct-light grid empty (extra
+/// collisions only equiangular) and lit, at distance alpha 0 (closed form) and 0.5.
+#[test]
+fn guided_flights_estimate_a_point_lights_single_scattering_without_bias() {
+    let (sigma, albedo) = (0.5f32, 0.8f32);
+    let medium = medium_of(&format!(
+        "type = \"homogeneous\"\nsigma_t = {sigma}\nalbedo = {albedo}\nphase = {{ type = \"hg\", g = 0.3 }}"
+    ));
+    let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
+    let t_max = 6.0f32;
+    let cutoff = 20f32.to_radians();
+    let at = Vec3A::new(2.0, 3.3, 3.0);
+    let lights = [
+        zerovar::guided::PointLight { position: at, cone: None },
+        zerovar::guided::PointLight { position: at, cone: Some((-Vec3A::Y, cutoff.cos())) },
+    ];
+    for light in lights {
+        // The light's in-scattered radiance at `t` (intensity 1, no falloff inside the cone).
+        let radiance = |t: f32| {
+            let p = ray.at(t);
+            let to = light.position - p;
+            let r = to.length();
+            let lit = light.cone.is_none_or(|(axis, cos)| (-to).dot(axis) >= r * cos);
+            if !lit {
+                return 0.0;
+            }
+            medium.phase.eval(ray.direction, to / r) * (-sigma * r).exp() / (r * r)
+        };
+        let expected = integrate_1d(
+            &|t| f64::from(sigma * albedo * (-sigma * t as f32).exp() * radiance(t as f32)),
+            0.0,
+            f64::from(t_max),
+            20_000,
+        );
+        for (alpha, lit_grid) in [(0.0f32, false), (0.0, true), (0.5, false), (0.5, true)] {
+            let what = format!("{:?}, alpha {alpha}, grid lit {lit_grid}", light.cone);
+            let mut estimate = MeanEstimate::default();
+            let mut sampler = Sampler::new(21, 0, 0);
+            let mut analytic =
+                Analytic { blob: Some(Vec3A::new(2.0, 3.0, 3.0)), ..Analytic::constant(1.0) };
+            let mut none = NoCache;
+            let counters = &mut Counters::default();
+            for _ in 0..400_000 {
+                let f = if lit_grid {
+                    zerovar::guided::distance::guided_flight(
+                        &medium,
+                        &ray,
+                        t_max,
+                        Spectrum::ONE,
+                        alpha,
+                        Some(&[light]),
+                        &mut analytic,
+                        &mut sampler,
+                        counters,
+                    )
+                } else {
+                    zerovar::guided::distance::guided_flight(
+                        &medium,
+                        &ray,
+                        t_max,
+                        Spectrum::ONE,
+                        alpha,
+                        Some(&[light]),
+                        &mut none,
+                        &mut sampler,
+                        counters,
+                    )
+                };
+                let mut x = 0.0;
+                if let GuidedEvent::Scatter { t } = f.event {
+                    x += f.weight.x * f.delta_share * radiance(t);
+                }
+                if let Some(e) = f.extra {
+                    x += e.weight.x * radiance(e.t);
+                }
+                estimate.push(f64::from(x));
+            }
+            estimate.assert_matches(expected, 4.5, &what);
+        }
+    }
 }

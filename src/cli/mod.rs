@@ -14,7 +14,7 @@ use zerovar::output::{ImageMetadata, write_exr, write_png};
 use zerovar::render::{
     Budget, GuidingOptions, RenderOptions, TrainBudget, render, render_with_field,
 };
-use zerovar::render::{MAX_TRAIN_PASSES, parse_guiding};
+use zerovar::render::{DEFAULT_TRAIN_SHARE, MAX_TRAIN_PASSES, parse_guiding};
 use zerovar::stats::{RenderStats, TrainingStats};
 
 #[derive(Parser)]
@@ -125,11 +125,15 @@ struct GuidingArgs {
     /// equal time paid better on every bench scene.
     #[arg(long, default_value_t = zerovar::render::DEFAULT_DISTANCE_ALPHA)]
     distance_alpha: f32,
-    /// Training passes of 1, 2, 4, ... samples per pixel before rendering.
-    #[arg(long, default_value_t = 5, conflicts_with = "train_time")]
-    train_passes: u32,
-    /// Train for this many seconds (doubling passes) instead of a fixed number of passes; with
-    /// --time, the seconds training leaves unspent go to the render.
+    /// Share of the budget (--time or --spp) that training takes, in (0, 1): doubling passes
+    /// of 1, 2, 4, ... samples per pixel while the next fits in it; the render gets the rest
+    /// [default: 0.25].
+    #[arg(long, allow_negative_numbers = true, conflicts_with_all = ["train_passes", "train_time"])]
+    train_share: Option<f64>,
+    /// Train this many passes instead (with --spp, the render then renders all of it).
+    #[arg(long, conflicts_with = "train_time")]
+    train_passes: Option<u32>,
+    /// Train for this many seconds instead (doubling passes; --time still includes them).
     #[arg(long, allow_negative_numbers = true)]
     train_time: Option<f64>,
     /// Parallax-aware lobes: each learns how far its light comes from and is re-aimed at it
@@ -155,6 +159,10 @@ struct TrainArgs {
     /// Where to save the field.
     #[arg(short, long)]
     output: PathBuf,
+    /// The render budget the field is for (--spp or --time, as `render` takes them): training
+    /// takes its share of it, as `render` would [default: the scene's render.spp].
+    #[command(flatten)]
+    budget: BudgetArgs,
     #[command(flatten)]
     guiding: GuidingArgs,
     /// Seed of the random streams [default: the scene's render.seed].
@@ -222,6 +230,10 @@ struct RenderArgs {
     /// Render guided by a field saved by `zerovar train` (no training phase).
     #[arg(long, value_name = "FIELD")]
     field: Option<PathBuf>,
+    /// Find the N samples that hold most of the image's error and trace their paths: a
+    /// table on stderr, and every decision of each path in --stats.
+    #[arg(long, value_name = "N", default_value_t = 0)]
+    fireflies: usize,
     /// What becomes of the training passes' images: combine (averaged into the result by
     /// inverse variance) or discard.
     #[arg(long, value_enum, default_value_t = TrainingImages::Combine, value_name = "WHAT")]
@@ -253,6 +265,7 @@ struct RenderCommand {
     tracker: zerovar::tracking::TrackerChoice,
     guiding: GuidingOptions,
     field: Option<PathBuf>,
+    fireflies: usize,
 }
 
 pub(crate) fn run() -> Result<()> {
@@ -456,15 +469,20 @@ fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingO
     if !(0.0..=1.0).contains(&a.distance_alpha) {
         bail!("--distance-alpha {}: give a probability in [0, 1]", a.distance_alpha);
     }
-    let train = match a.train_time {
-        Some(t) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
+    let train = match (a.train_time, a.train_passes, a.train_share) {
+        (Some(t), _, _) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
             bail!("--train-time {t}: give a positive number of seconds")
         }
-        Some(t) => TrainBudget::Time(Duration::from_secs_f64(t)),
-        None if a.train_passes == 0 || a.train_passes > MAX_TRAIN_PASSES => {
-            bail!("--train-passes {}: give 1 to 20 passes (pass k renders 2^k spp)", a.train_passes)
+        (Some(t), _, _) => TrainBudget::Time(Duration::from_secs_f64(t)),
+        (None, Some(n), _) if n == 0 || n > MAX_TRAIN_PASSES => {
+            bail!("--train-passes {n}: give 1 to 20 passes (pass k renders 2^k spp)")
         }
-        None => TrainBudget::Passes(a.train_passes),
+        (None, Some(n), _) => TrainBudget::Passes(n),
+        (None, None, Some(f)) if !(f > 0.0 && f < 1.0) => {
+            bail!("--train-share {f}: give a fraction of the budget above 0 and below 1")
+        }
+        (None, None, Some(f)) => TrainBudget::Share(f as f32),
+        (None, None, None) => TrainBudget::Share(DEFAULT_TRAIN_SHARE),
     };
     let mut field = GuidingOptions::default().field;
     if let Some(p) = a.parallax {
@@ -490,7 +508,13 @@ fn run_train(a: TrainArgs) -> Result<()> {
     let defines = parse_defines(&a.scene.define)?;
     let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
     let seed = a.seed.unwrap_or(scene.settings().seed);
-    let options = RenderOptions { budget: Budget::Samples(1), seed, threads: a.threads, guiding };
+    let options = RenderOptions {
+        budget: validate_budget(&a.budget, scene.settings().spp)?,
+        seed,
+        threads: a.threads,
+        guiding,
+        fireflies: 0,
+    };
     let bar = progress_bar(!a.quiet && std::io::stderr().is_terminal());
     let (field, report) = zerovar::render::train(&scene, &options, &|done, total| {
         bar.set_length(total);
@@ -593,6 +617,7 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
         exposure: a.exposure,
         progress: !a.quiet && std::io::stderr().is_terminal(),
         tracker: a.scene.tracker,
+        fireflies: a.fireflies,
     })
 }
 
@@ -605,7 +630,13 @@ fn run_render(c: RenderCommand) -> Result<()> {
         (None, None) => Budget::Samples(scene.settings().spp),
     };
     let seed = c.seed.unwrap_or(scene.settings().seed);
-    let options = RenderOptions { budget, seed, threads: c.threads, guiding: c.guiding };
+    let options = RenderOptions {
+        budget,
+        seed,
+        threads: c.threads,
+        guiding: c.guiding,
+        fireflies: c.fireflies,
+    };
     let bar = progress_bar(c.progress);
     let report = |done, total| {
         bar.set_length(total);
@@ -641,6 +672,7 @@ fn run_render(c: RenderCommand) -> Result<()> {
     stats.seed = seed;
     stats.threads = result.threads;
     stats.selection = result.selection.clone();
+    stats.fireflies = result.fireflies.clone();
     stats.training = result.training.as_ref().map(|t| TrainingStats {
         passes: t.passes,
         spp: t.spp,
@@ -649,19 +681,23 @@ fn run_render(c: RenderCommand) -> Result<()> {
         regions: t.field.regions,
         lobes: t.field.lobes,
         memory_bytes: t.field.memory_bytes,
+        share: t.seconds / (t.seconds + result.seconds).max(1e-9),
+        stop: t.stop,
     });
     if let Some(path) = &c.stats {
         write_stats(path, &stats)?;
     }
-    if let Some(t) = &result.training {
+    if let Some(t) = &stats.training {
         eprintln!(
-            "{}: trained {} passes ({} spp) in {:.2} s: {} regions, {} lobes",
+            "{}: trained {} passes ({} spp) in {:.2} s, {:.0}% of the render ({}): {} regions, {} lobes",
             c.scene.display(),
             t.passes,
             t.spp,
             t.seconds,
-            t.field.regions,
-            t.field.lobes
+            100.0 * t.share,
+            t.stop.describe(),
+            t.regions,
+            t.lobes
         );
     }
     if let Some(sel) = &result.selection {
@@ -693,6 +729,9 @@ fn run_render(c: RenderCommand) -> Result<()> {
         c.output.display(),
         c.png.display()
     );
+    if let Some(f) = &result.fireflies {
+        eprint!("{}: {}", c.scene.display(), f.summary());
+    }
     if stats.invalid_samples > 0 {
         eprintln!("warning: {} NaN or infinite samples were dropped", stats.invalid_samples);
     }

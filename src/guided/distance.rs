@@ -22,6 +22,7 @@
 //! [`guided_flight`]).
 
 use super::RadianceCache;
+use super::equiangular::{Equiangular, PointLight};
 use super::plain_flight::plain_flight;
 use crate::math::{Ray, Spectrum, is_grey, luminance, positive};
 use crate::media::{Medium, MediumKind};
@@ -84,6 +85,30 @@ pub struct GuidedDistance {
     pick: Spectrum,
     /// The extra collision's weights, once computed.
     direct: Option<DirectStretch>,
+    /// The extra collision's equiangular part, towards point lights (see [`aim_at`]).
+    ///
+    /// [`aim_at`]: Self::aim_at
+    towards: Option<Equiangular>,
+}
+
+/// The share of an extra collision's density that aims at point lights (equiangular) where
+/// the ray has some, the rest following the direct-light grid. Half: a one-sample mixture of
+/// two strategies at one half each weighs no sample more than twice what either alone would,
+/// so it is never far from the better one, whatever the scene.
+pub(super) const EQUIANGULAR_SHARE: f32 = 0.5;
+
+/// The equiangular share of an extra collision's density for a ray whose grid parts are `d`:
+/// [`EQUIANGULAR_SHARE`] beside a grid with light along the ray, all of it where the grid has
+/// none (a spot light's cone, narrower near the light than the grid's cells, can fall between
+/// the parts' middles), nothing without point lights to aim at; `None` when neither knows of
+/// any light (no extra collision).
+pub(super) fn equiangular_share(d: &DirectStretch, towards: bool) -> Option<f32> {
+    match (d.total > 0.0 && d.total.is_finite(), towards) {
+        (true, true) => Some(EQUIANGULAR_SHARE),
+        (false, true) => Some(1.0),
+        (true, false) => Some(0.0),
+        (false, false) => None,
+    }
 }
 
 /// Parts of the guided stretch an extra collision for delta lights picks among: finer than
@@ -102,6 +127,12 @@ pub(super) struct DirectStretch {
 }
 
 impl DirectStretch {
+    /// The part that holds ray parameter `t` of the stretch.
+    #[inline]
+    pub(super) fn part_of(&self, t: f32) -> usize {
+        ((t / self.length) as usize).min(DIRECT_SEGMENTS - 1)
+    }
+
     /// The part a uniform `u` picks in proportion to the weights: the first whose cumulative
     /// weight passes `u total`, or the last weighted one if rounding leaves `u total` past
     /// them all; `None` when no part has any weight.
@@ -324,7 +355,15 @@ impl GuidedDistance {
             ends_at_t_max,
             pick,
             direct: None,
+            towards: None,
         })
+    }
+
+    /// Lets the extra collision aim at point and spot `lights` too: its density becomes
+    /// the mixture of the grid's with the equiangular one over the guided stretch
+    /// (half of it where the grid knows of light along the ray, all of it where not).
+    pub fn aim_at(&mut self, lights: &[PointLight]) {
+        self.towards = Equiangular::new(&self.ray, self.guided_end, lights);
     }
 
     /// Computes the guided probability of segment `k` from the cache; nothing at `alpha` 0,
@@ -474,7 +513,8 @@ impl GuidedDistance {
     }
 
     /// Samples a collision for next-event estimation of delta lights: `(t, its density)`, the
-    /// density following the cache's delta-light in-scattering over the guided stretch;
+    /// density following the cache's delta-light in-scattering over the guided stretch (mixed
+    /// with the equiangular density towards point lights, see [`aim_at`](Self::aim_at));
     /// `None` where the cache knows of none along it.
     pub fn sample_direct(
         &mut self,
@@ -483,13 +523,35 @@ impl GuidedDistance {
         sampler: &mut Sampler,
     ) -> Option<(f32, f32)> {
         let d = self.direct_weights(medium, cache);
-        if !(d.total > 0.0 && d.total.is_finite()) {
-            return None;
+        let share = equiangular_share(&d, self.towards.is_some())?;
+        let u = sampler.next_1d();
+        let (t, j) = match &self.towards {
+            Some(e) if u < share => {
+                let t = e.sample(u / share, sampler.next_1d(), self.guided_end);
+                (t, d.part_of(t))
+            }
+            _ => {
+                let j = d.pick((u - share) / (1.0 - share))?;
+                let part = self.part(&d, j);
+                (part.start + self.offset(&part, sampler), j)
+            }
+        };
+        Some((t, self.mixed_density(&d, share, j, t)))
+    }
+
+    /// The extra collision's density at `t` in part `j` of the guided stretch: the grid's,
+    /// mixed with the equiangular one at `share` where the flight aims at point lights.
+    fn mixed_density(&self, d: &DirectStretch, share: f32, j: usize, t: f32) -> f32 {
+        let grid = if d.weights[j] == 0.0 {
+            0.0
+        } else {
+            let part = self.part(d, j);
+            d.weights[j] / d.total * self.offset_pdf(&part, t - part.start)
+        };
+        match &self.towards {
+            Some(e) => (1.0 - share) * grid + share * e.pdf(t),
+            None => grid,
         }
-        let j = d.pick(sampler.next_1d())?;
-        let part = self.part(&d, j);
-        let x = self.offset(&part, sampler);
-        Some((part.start + x, d.weights[j] / d.total * self.offset_pdf(&part, x)))
     }
 
     /// The density of [`sample_direct`](Self::sample_direct) at `t`.
@@ -500,15 +562,12 @@ impl GuidedDistance {
         cache: &mut impl RadianceCache,
     ) -> f32 {
         let d = self.direct_weights(medium, cache);
-        if !(d.total > 0.0 && d.total.is_finite() && t >= 0.0 && t < self.guided_end) {
-            return 0.0;
+        match equiangular_share(&d, self.towards.is_some()) {
+            Some(share) if t >= 0.0 && t < self.guided_end => {
+                self.mixed_density(&d, share, d.part_of(t), t)
+            }
+            _ => 0.0,
         }
-        let j = ((t / d.length) as usize).min(DIRECT_SEGMENTS - 1);
-        if d.weights[j] == 0.0 {
-            return 0.0;
-        }
-        let part = self.part(&d, j);
-        d.weights[j] / d.total * self.offset_pdf(&part, t - part.start)
     }
 
     /// Both strategies' probabilities of reaching segment `k` (of passing, for `count`).
@@ -573,9 +632,11 @@ impl GuidedDistance {
 
 /// A guided free flight along `ray` within `(0, t_max)` in `medium`, for throughput `beta`.
 ///
-/// With `extra_nee`, a homogeneous, non-emissive medium also returns an [`ExtraCollision`],
-/// placed by the cache's estimate of the light delta lights (the sun, point lights) scatter
-/// into the ray (`RadianceCache::direct`, in 16 parts of the guided stretch), and gives the
+/// With `extra_nee` (the scene's point and spot lights), a homogeneous,
+/// non-emissive medium also returns an [`ExtraCollision`], placed by the cache's estimate of
+/// the light delta lights (the sun, point lights) scatter into the ray
+/// (`RadianceCache::direct`, in 16 parts of the guided stretch), mixed with the equiangular
+/// density towards the point lights ([`GuidedDistance::aim_at`]), and gives the
 /// flight's own scattering collision a `delta_share` below 1: the two next-event estimates
 /// of delta lights combine by the power heuristic, for one shadow ray more. The flight's
 /// collision alone cannot follow single scattering closely: its density must also lead the
@@ -596,7 +657,7 @@ pub fn guided_flight(
     t_max: f32,
     beta: Spectrum,
     alpha: f32,
-    extra_nee: bool,
+    extra_nee: Option<&[PointLight]>,
     cache: &mut impl RadianceCache,
     sampler: &mut Sampler,
     counters: &mut Counters,
@@ -650,7 +711,10 @@ pub fn guided_flight(
         transmittance_homogeneous(sigma_t, t) * c.sigma_t * c.albedo
     };
     let (mut delta_share, mut extra) = (1.0, None);
-    if extra_nee && !medium.is_emissive() {
+    if let Some(points) = extra_nee
+        && !medium.is_emissive()
+    {
+        dist.aim_at(points);
         if let Some((t, direct)) = dist.sample_direct(medium, cache, sampler) {
             let own = dist.pdf(t, medium, cache, counters);
             // A density that underflowed in every channel leaves nothing to weigh (never 0/0).

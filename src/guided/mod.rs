@@ -10,11 +10,14 @@
 //! robust where the cache is poor.
 
 pub mod distance;
+mod equiangular;
 mod grid;
+pub mod halo;
 mod plain_flight;
 mod saved;
 pub mod window;
 
+pub use equiangular::PointLight;
 pub use grid::DirectGrid;
 pub use saved::{TRAINED_MAGIC, TRAINED_VERSION, TrainedField};
 

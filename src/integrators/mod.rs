@@ -5,6 +5,7 @@
 //! white-furnace and analytic tests check. The render session runs the same walk with guided
 //! components and a trained field.
 
+pub mod trace;
 mod volpath;
 pub mod walk;
 

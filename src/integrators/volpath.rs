@@ -51,7 +51,7 @@ impl VolPath {
         sampler: &mut Sampler,
         counters: &mut Counters,
     ) -> Spectrum {
-        let mut ctx = WalkContext { cache: &mut NoCache, pixel: None, recorder: None };
+        let mut ctx = WalkContext { cache: &mut NoCache, pixel: None, recorder: None, trace: None };
         walk::radiance(&self.settings(), scene, ray, medium, &mut ctx, sampler, counters)
     }
 }

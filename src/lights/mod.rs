@@ -96,6 +96,18 @@ impl Light {
         }
     }
 
+    /// A point or spot light as equiangular sampling aims at it.
+    pub fn point_light(&self) -> Option<crate::guided::PointLight> {
+        use crate::guided::PointLight;
+        match self {
+            Light::Point { position, .. } => Some(PointLight { position: *position, cone: None }),
+            Light::Spot { position, frame, cutoff, .. } => {
+                Some(PointLight { position: *position, cone: Some((frame.z, cutoff.cos())) })
+            }
+            _ => None,
+        }
+    }
+
     /// Samples a direction towards the light from `p`.
     pub fn sample(&self, shapes: &[Geometry], p: Vec3A, u: Vec2) -> Option<LightSample> {
         let delta = |to: Vec3A, intensity: Spectrum| {

@@ -20,8 +20,10 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 use zerovar_guiding::{Field, FieldConfig, FieldStats, GuidingError, PathRecorder, Sample};
 
+mod fireflies;
 mod select;
 
+pub use fireflies::{Firefly, FireflyReport};
 pub use select::Selection;
 
 const TILE: u32 = 16;
@@ -62,14 +64,54 @@ pub enum Budget {
     Time(Duration),
 }
 
-/// How much to train.
+/// How much to train. Training renders passes of 1, 2, 4, ... samples per pixel (Mueller et
+/// al. 2017), the field updated after each. A time budget ([`Budget::Time`]) is always the
+/// whole render's, training included: the render phase gets what training leaves.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum TrainBudget {
-    /// Passes of 1, 2, 4, ... samples per pixel (Mueller et al. 2017), the field updated
-    /// after each.
+    /// A share of the render's budget, in (0, 1): doubling passes while the next one fits in
+    /// that share of the time, or of the samples per pixel, and the render phase gets the
+    /// rest ([`DEFAULT_TRAIN_SHARE`]). With a sample budget the image then holds the budget's
+    /// samples per pixel in all, training's included (when they are combined).
+    Share(f32),
+    /// This many passes; with a sample budget the render phase then renders all of it.
     Passes(u32),
-    /// Doubling passes until this much time is spent (at least one pass).
+    /// Doubling passes until this much time is spent (at least one pass); with a sample
+    /// budget the render phase then renders all of it.
     Time(Duration),
+}
+
+/// The default [`TrainBudget::Share`]: a quarter. Training passes double, so the field is
+/// trained on about as many samples as a third of the render phase draws; the render phase
+/// keeps three quarters of the budget whatever the scene (forced to 4, 5 or 6 passes, the
+/// bench scenes' equal-time error hardly moved, see docs/experiments.md).
+pub const DEFAULT_TRAIN_SHARE: f32 = 0.25;
+
+/// Why training stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TrainingStop {
+    /// The number of passes asked for ([`TrainBudget::Passes`]) was done.
+    Passes,
+    /// The next pass, twice as long as the last, would have overrun the training budget.
+    Budget,
+    /// [`MAX_TRAIN_PASSES`] passes were done.
+    MostPasses,
+    /// Adaptive guiding's early look found too little to gain: the rest was rendered
+    /// unguided.
+    NoGain,
+}
+
+impl TrainingStop {
+    /// The reason in words.
+    pub fn describe(&self) -> &'static str {
+        match self {
+            TrainingStop::Passes => "the passes asked for",
+            TrainingStop::Budget => "the next pass would overrun its share of the budget",
+            TrainingStop::MostPasses => "the most passes",
+            TrainingStop::NoGain => "adaptive guiding found nothing to gain",
+        }
+    }
 }
 
 /// Guiding settings of a render.
@@ -109,7 +151,7 @@ impl Default for GuidingOptions {
             alpha: 0.5,
             surface_alpha: DEFAULT_SURFACE_ALPHA,
             distance_alpha: DEFAULT_DISTANCE_ALPHA,
-            train: TrainBudget::Passes(5),
+            train: TrainBudget::Share(DEFAULT_TRAIN_SHARE),
             field: FieldConfig::default(),
             combine_training: true,
             adaptive: false,
@@ -148,12 +190,15 @@ pub struct RenderOptions {
     pub threads: Option<usize>,
     /// Guiding.
     pub guiding: GuidingOptions,
+    /// Find the samples that hold the largest share of the image's error and trace their
+    /// paths ([`FireflyReport`]): this many of them (0: none).
+    pub fireflies: usize,
 }
 
 impl RenderOptions {
     /// Unguided rendering with `budget` and `seed` on all cores.
     pub fn unguided(budget: Budget, seed: u64) -> Self {
-        Self { budget, seed, threads: None, guiding: GuidingOptions::default() }
+        Self { budget, seed, threads: None, guiding: GuidingOptions::default(), fireflies: 0 }
     }
 
     /// Checks every setting; [`render`], [`render_with_field`] and [`train`] call it before
@@ -182,6 +227,10 @@ impl RenderOptions {
                 Err(OptionsError::TrainPasses(n))
             }
             TrainBudget::Time(t) if t.is_zero() => Err(OptionsError::ZeroTrainTime),
+            TrainBudget::Share(s) if !(s > 0.0 && s < 1.0) => Err(OptionsError::TrainShare(s)),
+            TrainBudget::Time(t) if matches!(self.budget, Budget::Time(b) if t >= b) => {
+                Err(OptionsError::TrainTimeOverBudget)
+            }
             _ => Ok(()),
         }
     }
@@ -241,6 +290,14 @@ pub enum OptionsError {
     /// A training time of zero.
     #[error("a training time of zero: give a positive duration")]
     ZeroTrainTime,
+    /// A training share outside (0, 1) (or NaN).
+    #[error("training share {0}: give a fraction of the budget above 0 and below 1")]
+    TrainShare(f32),
+    /// A training time as long as the whole time budget, or longer.
+    #[error(
+        "the training time is not shorter than the time budget, which includes it; give a shorter training time or a longer budget"
+    )]
+    TrainTimeOverBudget,
 }
 
 /// What training produced.
@@ -256,6 +313,8 @@ pub struct TrainingReport {
     pub samples: u64,
     /// The field after training.
     pub field: FieldStats,
+    /// Why training stopped.
+    pub stop: TrainingStop,
 }
 
 /// A finished render.
@@ -280,6 +339,9 @@ pub struct RenderResult {
     /// Whether the progress callback cancelled the render: `spp` passes were completed and
     /// the image holds exactly those.
     pub cancelled: bool,
+    /// The render phase's largest samples and their paths, when
+    /// [`RenderOptions::fireflies`] asked for them.
+    pub fireflies: Option<FireflyReport>,
 }
 
 /// Why a render could not run.
@@ -332,7 +394,7 @@ pub fn render(
             estimate: pixel_estimates(&films),
             guided_tiles: None,
         };
-        let options = &with_unused_training_time(options, report.seconds);
+        let options = &after_training(options, &report);
         Ok(guided_phase(scene, options, guidance, films, threads, progress, Some(report)))
     })
 }
@@ -369,10 +431,11 @@ fn early_pilot(
         training.seconds += selection.seconds;
         return None;
     }
-    let mut options = with_unused_training_time(options, training.seconds);
-    spend(&mut options, selection.seconds);
+    training.stop = TrainingStop::NoGain;
     // Training ends here: its films go to the render (for `combine_training`).
     let report = training.report();
+    let mut options = after_training(options, &report);
+    spend(&mut options, selection.seconds);
     let films = std::mem::take(&mut training.films);
     let mut result = final_phase(scene, &options, None, films, threads, progress, Some(report));
     result.seconds += selection.seconds;
@@ -380,21 +443,46 @@ fn early_pilot(
     Some(result)
 }
 
-/// `options` for the render phase: with a time budget for both training and rendering, the
-/// training time not spent (training stops when its next, twice as long, pass would overrun)
-/// goes to the render. The two budgets together are what the caller pays for: before,
-/// `compare`'s equal-time runs of 20 s used 17.4-17.8 s for guided methods whose last
-/// training pass did not fit.
-fn with_unused_training_time(options: &RenderOptions, training_seconds: f64) -> RenderOptions {
+/// `options` for the render phase after `training`: a time budget loses the seconds training
+/// took (the budget is the whole render's), a sample budget the samples per pixel it drew
+/// when training had a share of it; at least one sample per pixel is left.
+fn after_training(options: &RenderOptions, training: &TrainingReport) -> RenderOptions {
     let mut options = options.clone();
-    if let (Budget::Time(t), TrainBudget::Time(tt)) = (options.budget, options.guiding.train) {
-        let unused = (tt.as_secs_f64() - training_seconds).max(0.0);
-        options.budget = Budget::Time(t + Duration::from_secs_f64(unused));
+    match (options.budget, options.guiding.train) {
+        (Budget::Time(_), _) => spend(&mut options, training.seconds),
+        (Budget::Samples(n), TrainBudget::Share(_)) => {
+            options.budget = Budget::Samples(n.saturating_sub(training.spp).max(1));
+        }
+        (Budget::Samples(_), _) => {}
     }
     options
 }
 
-/// Takes `seconds` already spent for the render (a pilot's) out of a time budget.
+/// What training may take: at most this many passes, samples per pixel and seconds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct TrainingLimit {
+    passes: u32,
+    spp: Option<u64>,
+    seconds: Option<f64>,
+}
+
+impl TrainingLimit {
+    fn of(options: &RenderOptions) -> Self {
+        let most = Self { passes: MAX_TRAIN_PASSES, spp: None, seconds: None };
+        match (options.guiding.train, options.budget) {
+            (TrainBudget::Passes(n), _) => Self { passes: n.min(MAX_TRAIN_PASSES), ..most },
+            (TrainBudget::Time(t), _) => Self { seconds: Some(t.as_secs_f64()), ..most },
+            (TrainBudget::Share(s), Budget::Time(t)) => {
+                Self { seconds: Some(t.as_secs_f64() * f64::from(s)), ..most }
+            }
+            (TrainBudget::Share(s), Budget::Samples(n)) => {
+                Self { spp: Some((f64::from(n) * f64::from(s)) as u64), ..most }
+            }
+        }
+    }
+}
+
+/// Takes `seconds` already spent for the render (training's, a pilot's) out of a time budget.
 fn spend(options: &mut RenderOptions, seconds: f64) {
     if let Budget::Time(t) = options.budget {
         options.budget = Budget::Time(t.saturating_sub(Duration::from_secs_f64(seconds)));
@@ -486,6 +574,10 @@ struct Training {
     seconds: f64,
     /// Whether the budget is spent.
     done: bool,
+    /// Why training stopped (once `done`).
+    stop: TrainingStop,
+    /// Samples per pixel of the next pass.
+    next: u32,
 }
 
 impl Training {
@@ -498,6 +590,8 @@ impl Training {
             samples: 0,
             seconds: 0.0,
             done: false,
+            stop: TrainingStop::Budget,
+            next: 1,
         })
     }
 
@@ -511,18 +605,18 @@ impl Training {
     ) -> Result<(), RenderError> {
         let settings = walk_settings(scene, options);
         let [w, h] = scene.camera.resolution();
-        let (passes, limit) = match options.guiding.train {
-            TrainBudget::Passes(n) => (n, None),
-            TrainBudget::Time(t) => (u32::MAX, Some(t.as_secs_f64())),
+        let limit = TrainingLimit::of(options);
+        let pixels = u64::from(w) * u64::from(h);
+        // Progress in samples, or in milliseconds under a time limit.
+        let total = match (limit.seconds, limit.spp) {
+            (Some(t), _) => (t * 1000.0) as u64,
+            (None, Some(spp)) => spp.max(1) * pixels,
+            (None, None) => ((1u64 << limit.passes) - 1) * pixels,
         };
-        let total = match options.guiding.train {
-            TrainBudget::Passes(n) => ((1u64 << n.min(30)) - 1) * (w * h) as u64,
-            TrainBudget::Time(t) => t.as_millis() as u64,
-        };
-        let last = passes.min(20);
+        let last = limit.passes;
         while !self.done && (self.films.len() as u32) < until.min(last) {
             let pass = self.films.len() as u32;
-            let count = 1u32 << pass;
+            let count = self.next;
             let mut film = Film::new(w, h);
             let estimate = pixel_estimates(&self.films);
             // Each pass draws from its own streams, independent of the render phase's.
@@ -537,6 +631,7 @@ impl Training {
                 estimate: estimate.as_deref(),
                 record: true,
                 guided_tiles: None,
+                largest: false,
             };
             let Some(out) = render_pass(scene, spec, &mut film, progress, &|_| {}) else {
                 return Err(RenderError::Cancelled);
@@ -548,14 +643,31 @@ impl Training {
             self.films.push(film);
             let pass_seconds = pass_start.elapsed().as_secs_f64();
             self.seconds += pass_seconds;
-            self.done = pass + 1 >= last;
-            match limit {
-                None => progress.report(((1u64 << (pass + 1)) - 1) * (w * h) as u64, total),
-                Some(t) => {
-                    progress.report(((self.seconds * 1000.0) as u64).min(total), total);
-                    // Stop when the next pass (twice as long) would overrun the budget.
-                    self.done |= self.seconds + pass_seconds * 2.0 > t;
-                }
+            if pass + 1 >= last {
+                self.done = true;
+                self.stop = match options.guiding.train {
+                    TrainBudget::Passes(_) => TrainingStop::Passes,
+                    _ => TrainingStop::MostPasses,
+                };
+            }
+            // The next pass doubles, or fills what is left of the limit if that is less; one
+            // smaller than this pass is not worth its field update, and training stops.
+            let mut fits = u64::from(count) * 2;
+            if let Some(t) = limit.seconds {
+                let per_spp = pass_seconds / f64::from(count);
+                fits = fits.min((0.95 * (t - self.seconds) / per_spp).max(0.0) as u64);
+            }
+            if let Some(spp) = limit.spp {
+                fits = fits.min(spp.saturating_sub(u64::from(self.spp)));
+            }
+            if !self.done && fits < u64::from(count) {
+                self.done = true;
+                self.stop = TrainingStop::Budget;
+            }
+            self.next = fits.min(u64::from(u32::MAX)) as u32;
+            match limit.seconds {
+                None => progress.report((u64::from(self.spp) * pixels).min(total), total),
+                Some(_) => progress.report(((self.seconds * 1000.0) as u64).min(total), total),
             }
         }
         Ok(())
@@ -578,6 +690,7 @@ impl Training {
             seconds: self.seconds,
             samples: self.samples,
             field: self.field.stats(),
+            stop: self.stop,
         }
     }
 
@@ -695,10 +808,15 @@ fn final_phase(
         estimate: guidance.as_ref().and_then(|g| g.estimate.as_deref()),
         record: false,
         guided_tiles: guidance.as_ref().and_then(|g| g.guided_tiles.as_deref()),
+        largest: options.fireflies > 0,
     };
     let [w, h] = scene.camera.resolution();
     let mut film = Film::new(w, h);
     let mut counters = Counters::default();
+    let mut largest =
+        vec![Largest::default(); if options.fireflies > 0 { (w * h) as usize } else { 0 }];
+    // The weight windows' estimate each pass used, by its first sample (when they change).
+    let mut estimates: Vec<(u32, Vec<f32>)> = Vec::new();
     let start = Instant::now();
     let mut done = 0u32;
     match options.budget {
@@ -717,6 +835,7 @@ fn final_phase(
                 let Some(out) = render_pass(scene, this, &mut film, progress, &report) else {
                     break;
                 };
+                keep_largest(&mut largest, &out, &mut estimates, done, own_estimate, &estimate);
                 counters += out.counters;
                 done += batch;
                 if own_estimate {
@@ -734,6 +853,7 @@ fn final_phase(
                 let Some(out) = render_pass(scene, this, &mut film, progress, &|_| {}) else {
                     break;
                 };
+                keep_largest(&mut largest, &out, &mut estimates, done, own_estimate, &estimate);
                 counters += out.counters;
                 done += batch;
                 if own_estimate {
@@ -754,6 +874,13 @@ fn final_phase(
             }
         }
     }
+    let fireflies = (options.fireflies > 0 && !progress.stopped()).then(|| {
+        let estimate_for = |sample: u32| {
+            let own = estimates.iter().rev().find(|(first, _)| *first <= sample);
+            own.map(|(_, e)| &e[..]).or(guidance.as_ref().and_then(|g| g.estimate.as_deref()))
+        };
+        fireflies::find(scene, pass(0, 0), &film, &largest, options.fireflies, estimate_for)
+    });
     let image = if options.guiding.combine_training && !training_films.is_empty() {
         combine_by_inverse_variance(&training_films, &film)
     } else {
@@ -769,6 +896,29 @@ fn final_phase(
         training: report,
         selection: None,
         cancelled: progress.stopped(),
+        fireflies,
+    }
+}
+
+/// Merges a pass's largest samples into `largest` and, for the firefly diagnostic's replays,
+/// keeps the windows' estimate the pass starting at sample `first` used when it is the
+/// render's own (`own_estimate`), which changes from pass to pass.
+fn keep_largest(
+    largest: &mut [Largest],
+    out: &PassOutput,
+    estimates: &mut Vec<(u32, Vec<f32>)>,
+    first: u32,
+    own_estimate: bool,
+    estimate: &Option<Vec<f32>>,
+) {
+    if largest.is_empty() {
+        return;
+    }
+    for (l, o) in largest.iter_mut().zip(&out.largest) {
+        l.merge(o);
+    }
+    if own_estimate && let Some(e) = estimate {
+        estimates.push((first, e.clone()));
     }
 }
 
@@ -839,6 +989,8 @@ struct Pass<'a> {
     record: bool,
     /// Per tile, whether it is guided; `None` guides every tile as `settings` say.
     guided_tiles: Option<&'a [bool]>,
+    /// Keep each pixel's largest sample (for the firefly diagnostic).
+    largest: bool,
 }
 
 /// What a pass returns.
@@ -851,6 +1003,31 @@ struct PassOutput {
     samples: Vec<Sample>,
     /// Direct-fluence records in tile order (when recording).
     records: Vec<crate::guided::DirectRecord>,
+    /// Per pixel, its largest sample (when the pass looks for them).
+    largest: Vec<Largest>,
+}
+
+/// A pixel's largest sample so far, by luminance.
+#[derive(Clone, Copy, Debug, Default)]
+struct Largest {
+    value: Spectrum,
+    /// Its sample index (`None` before any sample).
+    index: Option<u32>,
+}
+
+impl Largest {
+    #[inline]
+    fn offer(&mut self, l: Spectrum, index: u32) {
+        if self.index.is_none() || luminance(l) > luminance(self.value) {
+            *self = Largest { value: l, index: Some(index) };
+        }
+    }
+
+    fn merge(&mut self, o: &Largest) {
+        if let Some(i) = o.index {
+            self.offer(o.value, i);
+        }
+    }
 }
 
 /// The tiles of a `w x h` image in row-major order.
@@ -869,29 +1046,18 @@ fn render_pass(
 ) -> Option<PassOutput> {
     let [w, h] = scene.camera.resolution();
     let tiles = tiles(w, h);
-    let unguided = WalkSettings { guide: Components::OFF, ..*pass.settings };
     let floor = pass.estimate.map_or(0.0, crate::guided::window::floor);
-    type TileResult = ((Vec<PixelSum>, Counters, Vec<Sample>), Vec<crate::guided::DirectRecord>);
-    let results: Vec<TileResult> = tiles
+    let results: Vec<TileOutput> = tiles
         .par_iter()
         .enumerate()
         .map(|(index, &tile)| {
             if monitor.stopped() {
-                return Default::default(); // the pass is discarded below
+                return TileOutput::default(); // the pass is discarded below
             }
-            let guided = pass.guided_tiles.is_none_or(|g| g[index]);
-            let out = match pass.field {
-                Some((f, direct)) if guided => {
-                    let mut cache = FieldCache::with_direct(f, direct, pass.record);
-                    let out = render_tile(scene, &pass, pass.settings, tile, floor, &mut cache);
-                    (out, cache.take_records())
-                }
-                _ => {
-                    let settings = if guided { pass.settings } else { &unguided };
-                    (render_tile(scene, &pass, settings, tile, floor, &mut NoCache), Vec::new())
-                }
-            };
-            on_tile(out.0.0.len() as u64 * pass.count as u64);
+            let work = RenderTile { scene, pass, tile, floor };
+            let (mut out, records) = with_tile_walk(&pass, index, work);
+            out.records = records;
+            on_tile(out.sums.len() as u64 * pass.count as u64);
             out
         })
         .collect();
@@ -901,84 +1067,158 @@ fn render_pass(
     let mut out = PassOutput::default();
     // A training pass gathers hundreds of megabytes of samples: sized once, not grown by
     // doubling (each doubling copied everything so far).
-    out.samples.reserve_exact(results.iter().map(|r| r.0.2.len()).sum());
-    out.records.reserve_exact(results.iter().map(|r| r.1.len()).sum());
-    for (&(tx, ty), ((sums, c, s), r)) in tiles.iter().zip(results) {
-        out.counters += c;
-        out.tile_counters.push(c);
-        out.samples.extend(s);
-        out.records.extend(r);
+    out.samples.reserve_exact(results.iter().map(|r| r.samples.len()).sum());
+    out.records.reserve_exact(results.iter().map(|r| r.records.len()).sum());
+    if pass.largest {
+        out.largest = vec![Largest::default(); (w * h) as usize];
+    }
+    for (&(tx, ty), tile) in tiles.iter().zip(results) {
+        out.counters += tile.counters;
+        out.tile_counters.push(tile.counters);
+        out.samples.extend(tile.samples);
+        out.records.extend(tile.records);
         let (x0, y0) = (tx * TILE, ty * TILE);
         let tw = (x0 + TILE).min(w) - x0;
-        for (i, s) in sums.iter().enumerate() {
+        for (i, s) in tile.sums.iter().enumerate() {
             let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
-            film.pixels[(y * w + x) as usize].merge(s);
+            let p = (y * w + x) as usize;
+            film.pixels[p].merge(s);
+            if let Some(l) = tile.largest.get(i) {
+                out.largest[p].merge(l);
+            }
         }
     }
     Some(out)
 }
 
-fn render_tile<C: RadianceCache>(
-    scene: &Scene,
+/// Work on one tile that runs the walk with some radiance cache (a closure generic over the
+/// cache, so that each cache gets its own monomorphised walk).
+trait TileWork {
+    type Output;
+    fn run<C: RadianceCache>(self, settings: &WalkSettings, cache: &mut C) -> Self::Output;
+}
+
+/// Runs `work` with the walk settings and the radiance cache of tile `index` in `pass`: the
+/// field's, or none where the pass has no field or the tile is not guided. Also returns the
+/// direct-fluence records the cache gathered (when the pass records).
+fn with_tile_walk<W: TileWork>(
     pass: &Pass<'_>,
-    settings: &WalkSettings,
-    (tx, ty): (u32, u32),
-    window_floor: f32,
-    cache: &mut C,
-) -> (Vec<PixelSum>, Counters, Vec<Sample>) {
-    let Pass { seed, first, count, estimate, record, .. } = *pass;
-    let [w, h] = scene.camera.resolution();
-    let mut counters = Counters::default();
-    let mut recorder = PathRecorder::new();
-    let mut samples = Vec::new();
-    let (x0, y0) = (tx * TILE, ty * TILE);
-    let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-    let mut sums = Vec::with_capacity(((x1 - x0) * (y1 - y0)) as usize);
-    for y in y0..y1 {
-        for x in x0..x1 {
-            let pixel = (y as u64) * w as u64 + x as u64;
-            let mut sum = PixelSum::default();
-            for s in first..first + count {
-                let mut sampler = Sampler::new(seed, pixel, s as u64);
-                let jitter = sampler.next_2d();
-                let ray = scene.camera.ray(Vec2::new(x as f32, y as f32) + jitter);
-                let mut ctx = WalkContext {
-                    cache: &mut *cache,
-                    pixel: estimate.map(|e| e[pixel as usize] + window_floor),
-                    recorder: if record { Some(&mut recorder) } else { None },
-                };
-                let l = walk::radiance(
-                    settings,
-                    scene,
-                    ray,
-                    scene.camera_medium,
-                    &mut ctx,
-                    &mut sampler,
-                    &mut counters,
-                );
-                if is_finite(l) {
-                    sum.add(l);
-                    if record {
-                        recorder.finish(&mut samples);
-                    }
-                } else {
-                    counters.invalid_samples += 1;
-                    sum.add(Spectrum::ZERO);
-                    recorder.clear();
-                }
-            }
-            sums.push(sum);
+    index: usize,
+    work: W,
+) -> (W::Output, Vec<crate::guided::DirectRecord>) {
+    let guided = pass.guided_tiles.is_none_or(|g| g[index]);
+    match pass.field {
+        Some((f, direct)) if guided => {
+            let mut cache = FieldCache::with_direct(f, direct, pass.record);
+            let out = work.run(pass.settings, &mut cache);
+            (out, cache.take_records())
+        }
+        _ => {
+            let unguided = WalkSettings { guide: Components::OFF, ..*pass.settings };
+            (work.run(if guided { pass.settings } else { &unguided }, &mut NoCache), Vec::new())
         }
     }
-    (sums, counters, samples)
+}
+
+/// Renders every pixel sample of a tile.
+struct RenderTile<'a, 'p> {
+    scene: &'a Scene,
+    pass: Pass<'p>,
+    tile: (u32, u32),
+    /// Added to the pixel estimates for weight windows (`window::floor`).
+    floor: f32,
+}
+
+/// What one tile of a pass returns.
+#[derive(Default)]
+struct TileOutput {
+    /// Per pixel of the tile, row by row.
+    sums: Vec<PixelSum>,
+    counters: Counters,
+    /// Training samples (when recording).
+    samples: Vec<Sample>,
+    /// Direct-fluence records (when recording).
+    records: Vec<crate::guided::DirectRecord>,
+    /// Per pixel, its largest sample (when the pass looks for fireflies).
+    largest: Vec<Largest>,
+}
+
+impl TileWork for RenderTile<'_, '_> {
+    type Output = TileOutput;
+
+    fn run<C: RadianceCache>(self, settings: &WalkSettings, cache: &mut C) -> TileOutput {
+        let RenderTile { scene, pass, tile: (tx, ty), floor } = self;
+        let [w, h] = scene.camera.resolution();
+        let mut out = TileOutput::default();
+        let mut recorder = PathRecorder::new();
+        let (x0, y0) = (tx * TILE, ty * TILE);
+        let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+        out.sums.reserve(((x1 - x0) * (y1 - y0)) as usize);
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let mut sum = PixelSum::default();
+                let mut largest = Largest::default();
+                for s in pass.first..pass.first + pass.count {
+                    let mut ctx = WalkContext {
+                        cache: &mut *cache,
+                        pixel: pass.estimate.map(|e| e[(y * w + x) as usize] + floor),
+                        recorder: if pass.record { Some(&mut recorder) } else { None },
+                        trace: None,
+                    };
+                    let l = camera_sample(
+                        scene,
+                        settings,
+                        pass.seed,
+                        [x, y],
+                        s,
+                        &mut ctx,
+                        &mut out.counters,
+                    );
+                    if is_finite(l) {
+                        sum.add(l);
+                        largest.offer(l, s);
+                        if pass.record {
+                            recorder.finish(&mut out.samples);
+                        }
+                    } else {
+                        out.counters.invalid_samples += 1;
+                        sum.add(Spectrum::ZERO);
+                        recorder.clear();
+                    }
+                }
+                out.sums.push(sum);
+                if pass.largest {
+                    out.largest.push(largest);
+                }
+            }
+        }
+        out
+    }
+}
+
+/// Sample `s` of pixel `[x, y]` from the streams of `seed`: the radiance its walks bring back.
+fn camera_sample<C: RadianceCache>(
+    scene: &Scene,
+    settings: &WalkSettings,
+    seed: u64,
+    [x, y]: [u32; 2],
+    s: u32,
+    ctx: &mut WalkContext<'_, C>,
+    counters: &mut Counters,
+) -> Spectrum {
+    let pixel = u64::from(y) * u64::from(scene.camera.resolution()[0]) + u64::from(x);
+    let mut sampler = Sampler::new(seed, pixel, u64::from(s));
+    let jitter = sampler.next_2d();
+    let ray = scene.camera.ray(Vec2::new(x as f32, y as f32) + jitter);
+    walk::radiance(settings, scene, ray, scene.camera_medium, ctx, &mut sampler, counters)
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn timed(render: f64, train: TrainBudget) -> RenderOptions {
-        let mut options = RenderOptions::unguided(Budget::Time(Duration::from_secs_f64(render)), 0);
+    fn timed(budget: f64, train: TrainBudget) -> RenderOptions {
+        let mut options = RenderOptions::unguided(Budget::Time(Duration::from_secs_f64(budget)), 0);
         options.guiding.train = train;
         options
     }
@@ -990,25 +1230,53 @@ mod tests {
         }
     }
 
-    /// The render's budget after training took `training` seconds and a pilot `pilot`.
-    fn after(options: &RenderOptions, training: f64, pilot: f64) -> RenderOptions {
-        let mut options = with_unused_training_time(options, training);
-        spend(&mut options, pilot);
-        options
+    fn trained(seconds: f64, spp: u32) -> TrainingReport {
+        TrainingReport {
+            passes: 0,
+            spp,
+            seconds,
+            samples: 0,
+            field: Field::new(FieldConfig::default()).expect("default field").stats(),
+            stop: TrainingStop::Budget,
+        }
     }
 
     #[test]
-    fn training_time_not_spent_goes_to_the_render() {
-        let train = TrainBudget::Time(Duration::from_secs(5));
-        assert!((seconds(&after(&timed(15.0, train), 3.5, 0.0)) - 16.5).abs() < 1e-9);
-        // A pilot's seconds come out of it; an overrun takes nothing away.
-        assert!((seconds(&after(&timed(15.0, train), 3.5, 2.0)) - 14.5).abs() < 1e-9);
-        assert!((seconds(&after(&timed(15.0, train), 6.0, 0.0)) - 15.0).abs() < 1e-9);
-        // Training by passes has no time to give; sample budgets are left alone.
-        let passes = TrainBudget::Passes(4);
-        assert!((seconds(&after(&timed(15.0, passes), 3.5, 1.0)) - 14.0).abs() < 1e-9);
+    fn the_budget_includes_training() {
+        // A time budget loses what training took, whatever the training budget; a pilot's
+        // seconds come out of it too.
+        for train in [TrainBudget::Share(0.25), TrainBudget::Time(Duration::from_secs(5))] {
+            let options = timed(20.0, train);
+            assert!((seconds(&after_training(&options, &trained(4.5, 31))) - 15.5).abs() < 1e-9);
+            let mut options = after_training(&options, &trained(4.5, 31));
+            spend(&mut options, 2.0);
+            assert!((seconds(&options) - 13.5).abs() < 1e-9);
+        }
+        // A sample budget shared with training loses training's samples per pixel; with
+        // passes asked for explicitly, the render phase renders all of it.
         let mut spp = RenderOptions::unguided(Budget::Samples(64), 0);
-        spp.guiding.train = train;
-        assert!(matches!(after(&spp, 1.0, 0.5).budget, Budget::Samples(64)));
+        assert!(matches!(after_training(&spp, &trained(1.0, 15)).budget, Budget::Samples(49)));
+        assert!(matches!(after_training(&spp, &trained(1.0, 63)).budget, Budget::Samples(1)));
+        spp.guiding.train = TrainBudget::Passes(4);
+        assert!(matches!(after_training(&spp, &trained(1.0, 15)).budget, Budget::Samples(64)));
+    }
+
+    #[test]
+    fn a_share_limits_training_to_its_part_of_the_budget() {
+        let limit = TrainingLimit::of(&timed(20.0, TrainBudget::Share(0.25)));
+        assert_eq!(limit.seconds, Some(5.0));
+        assert_eq!(limit.spp, None);
+        let mut spp = RenderOptions::unguided(Budget::Samples(64), 0);
+        spp.guiding.train = TrainBudget::Share(0.25);
+        assert_eq!(TrainingLimit::of(&spp).spp, Some(16));
+        spp.guiding.train = TrainBudget::Passes(3);
+        assert_eq!(TrainingLimit::of(&spp), TrainingLimit { passes: 3, spp: None, seconds: None });
+        // Shares outside (0, 1) and training times as long as the budget are refused.
+        for bad in [0.0, 1.0, -0.5, f32::NAN] {
+            spp.guiding.train = TrainBudget::Share(bad);
+            assert!(matches!(spp.validate(), Err(OptionsError::TrainShare(_))), "{bad}");
+        }
+        let long = timed(5.0, TrainBudget::Time(Duration::from_secs(5)));
+        assert_eq!(long.validate(), Err(OptionsError::TrainTimeOverBudget));
     }
 }

@@ -153,6 +153,7 @@ pub(super) fn pilot(
             estimate: guidance.estimate.as_deref(),
             record: false,
             guided_tiles: None,
+            largest: false,
         };
         render_pass(scene, pass, &mut film, monitor, &report).map(|o| (film, o.tile_counters))
     };

@@ -226,6 +226,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
         lights.iter().enumerate().filter(|(_, l)| l.is_infinite()).map(|(i, _)| i as u32).collect();
     let delta_lights =
         lights.iter().enumerate().filter(|(_, l)| l.is_delta()).map(|(i, _)| i as u32).collect();
+    let point_lights = lights.iter().filter_map(Light::point_light).collect();
     let trackers = media.iter().map(Tracker::for_medium).collect();
     let bvh = Bvh::build(&shapes);
     Ok(Scene {
@@ -238,6 +239,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
         lights,
         infinite_lights,
         delta_lights,
+        point_lights,
         camera,
         camera_medium,
         global_medium,

@@ -188,6 +188,8 @@ pub struct Scene {
     pub(crate) infinite_lights: Vec<u32>,
     /// Indices of delta lights (guided flights draw extra collisions for them).
     pub(crate) delta_lights: Vec<u32>,
+    /// Positions of the point and spot lights (extra collisions aim at them).
+    pub(crate) point_lights: Vec<crate::guided::PointLight>,
     /// The camera.
     pub(crate) camera: Camera,
     /// The medium around the camera.

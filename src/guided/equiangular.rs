@@ -1,0 +1,297 @@
+//! Equiangular sampling of a stretch of ray towards point lights (Kulla and Fajardo 2012).
+//!
+//! Next-event estimation of a point or spot light from a point at distance `r` carries
+//! `1 / r^2`: from collisions drawn by any density that stays bounded near the light (the
+//! free path, the direct-light grid), the estimate's variance diverges there, and in a fog
+//! with a light inside it the largest samples come from collisions within a fraction of a
+//! mean free path of the light. The equiangular density over the ray is proportional to
+//! `1 / r^2`, so mixed into the extra collision's density it bounds the estimate near the
+//! light by the ray's distance from it. A spot light's density covers only the part of the
+//! ray inside its cone, where its light is.
+
+use crate::math::Ray;
+use arrayvec::ArrayVec;
+use glam::Vec3A;
+
+/// Point lights an equiangular density aims at; further ones are left to the other
+/// strategies (a sampling density may ignore them without bias).
+pub(super) const MAX_POINT_LIGHTS: usize = 8;
+
+/// A point or spot light as equiangular sampling sees it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointLight {
+    /// Where it is.
+    pub position: Vec3A,
+    /// A spot light's cone: its unit axis and the cosine of its cutoff half-angle.
+    pub cone: Option<(Vec3A, f32)>,
+}
+
+impl PointLight {
+    /// The part of `(0, end)` of `ray` the light reaches: inside a spot light's cone (a
+    /// little wider, for rounding), all of it for a point light or a cone of 90 degrees or
+    /// more; `None` if empty.
+    fn reach(&self, ray: &Ray, end: f32) -> Option<(f32, f32)> {
+        let Some((axis, cos_cutoff)) = self.cone.filter(|c| c.1 > 0.02) else {
+            return Some((0.0, end));
+        };
+        // Inside the forward cone: ((v + t d).a)^2 >= cos^2 |v + t d|^2 with (v + t d).a >= 0.
+        let v = ray.origin - self.position;
+        let (da, va) = (ray.direction.dot(axis), v.dot(axis));
+        let cos2 = cos_cutoff * cos_cutoff;
+        let a = da * da - cos2;
+        let b = 2.0 * (da * va - cos2 * ray.direction.dot(v));
+        let c = va * va - cos2 * v.length_squared();
+        // The forward half-space of the apex.
+        let (mut lo, mut hi) = (0.0f32, end);
+        if da > 0.0 {
+            lo = lo.max(-va / da);
+        } else if da < 0.0 {
+            hi = hi.min(-va / da);
+        } else if va < 0.0 {
+            return None;
+        }
+        // Where the quadratic is non-negative, within the forward half-space: one interval,
+        // the cone being convex. A ray steeper than the cone (a > 0) crosses both nappes, and
+        // its forward part lies past the larger root when it heads along the axis, before
+        // the smaller one otherwise; a shallower one (a < 0) is inside between the roots.
+        let disc = b * b - 4.0 * a * c;
+        if a.abs() <= 1e-12 {
+            // Parallel to the cone's surface: the quadratic is linear.
+            if b > 0.0 {
+                lo = lo.max(-c / b);
+            } else if b < 0.0 {
+                hi = hi.min(-c / b);
+            } else if c < 0.0 {
+                return None;
+            }
+        } else if disc < 0.0 {
+            if a < 0.0 {
+                return None;
+            }
+        } else {
+            let q = -0.5 * (b + b.signum() * disc.sqrt());
+            let (r1, r2) = if q != 0.0 { (q / a, c / q) } else { (0.0, 0.0) };
+            let (r1, r2) = (r1.min(r2), r1.max(r2));
+            if a < 0.0 {
+                (lo, hi) = (lo.max(r1), hi.min(r2));
+            } else if da > 0.0 {
+                lo = lo.max(r2);
+            } else {
+                hi = hi.min(r1);
+            }
+        }
+        let pad = 1e-4 * (hi - lo).abs().max(1e-3);
+        let (lo, hi) = ((lo - pad).max(0.0), (hi + pad).min(end));
+        (hi > lo).then_some((lo, hi))
+    }
+}
+
+/// One light seen from the ray: the ray parameter of its foot on the ray, its distance from
+/// the ray, the stretch it reaches, and the angles that stretch spans as seen from it.
+#[derive(Clone, Copy, Debug)]
+struct Towards {
+    foot: f32,
+    distance: f32,
+    start: f32,
+    end: f32,
+    theta_start: f32,
+    span: f32,
+}
+
+/// The equiangular density of a stretch `(0, end)` of a ray, averaged over point lights.
+#[derive(Clone, Debug)]
+pub(super) struct Equiangular {
+    lights: ArrayVec<Towards, MAX_POINT_LIGHTS>,
+}
+
+impl Equiangular {
+    /// The density over `(0, end)` of `ray` towards `lights` (the first
+    /// [`MAX_POINT_LIGHTS`]), each over the part of it the light reaches; `None` without
+    /// lights or without a stretch any reaches.
+    pub(super) fn new(ray: &Ray, end: f32, point_lights: &[PointLight]) -> Option<Self> {
+        if end.is_nan() || end <= 0.0 {
+            return None;
+        }
+        let mut lights = ArrayVec::new();
+        for light in point_lights.iter().take(MAX_POINT_LIGHTS) {
+            let Some((start, stop)) = light.reach(ray, end) else { continue };
+            let to = light.position - ray.origin;
+            let foot = to.dot(ray.direction);
+            // The cross product keeps the distance accurate for lights near the ray, where
+            // |to|^2 - foot^2 would cancel; a light on the ray itself gets a tiny distance,
+            // which keeps the density finite and the sampler and its density consistent.
+            let scale = to.length().max(1.0);
+            let distance = to.cross(ray.direction).length().max(1e-6 * scale);
+            let theta_start = ((start - foot) / distance).atan();
+            let theta_end = ((stop - foot) / distance).atan();
+            let span = theta_end - theta_start;
+            if span > 0.0 && span.is_finite() {
+                lights.push(Towards { foot, distance, start, end: stop, theta_start, span });
+            }
+        }
+        (!lights.is_empty()).then_some(Self { lights })
+    }
+
+    /// A ray parameter in `(0, end)`: `pick` chooses the light, `u` the angle.
+    pub(super) fn sample(&self, pick: f32, u: f32, end: f32) -> f32 {
+        let n = self.lights.len();
+        let l = self.lights[((pick * n as f32) as usize).min(n - 1)];
+        let t = l.foot + l.distance * (l.theta_start + u * l.span).tan();
+        // Inside the light's stretch and short of the end (not `clamp`: a stretch within
+        // rounding of the end may have its start past the bound).
+        t.max(l.start).min(l.end).min(end * (1.0 - 1e-6))
+    }
+
+    /// The density at ray parameter `t` (within the stretch).
+    pub(super) fn pdf(&self, t: f32) -> f32 {
+        let sum: f32 = self
+            .lights
+            .iter()
+            .filter(|l| t >= l.start && t <= l.end)
+            .map(|l| {
+                let x = t - l.foot;
+                l.distance / (l.span * (l.distance * l.distance + x * x))
+            })
+            .sum();
+        sum / self.lights.len() as f32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use zerovar_testkit::{chi2_1d, equal_mass_edges, integrate_1d};
+
+    fn point(position: Vec3A) -> PointLight {
+        PointLight { position, cone: None }
+    }
+
+    fn cases() -> Vec<(Ray, f32, Vec<PointLight>)> {
+        let o = Vec3A::new(0.1, -0.2, 0.3);
+        let d = Vec3A::new(1.0, 0.2, -0.1).normalize();
+        let spot = PointLight {
+            position: o + 2.0 * d + Vec3A::new(0.0, 0.8, 0.0),
+            cone: Some((-Vec3A::Y, 20f32.to_radians().cos())),
+        };
+        vec![
+            // A light beside the middle of the stretch, one just off the ray, one behind its
+            // start, two at once, and a spot light whose cone the ray crosses.
+            (Ray::new(o, d), 4.0, vec![point(o + 2.0 * d + Vec3A::new(0.0, 0.3, 0.0))]),
+            (Ray::new(o, d), 4.0, vec![point(o + 1.0 * d + Vec3A::new(0.0, 0.0, 1e-3))]),
+            (Ray::new(o, d), 10.0, vec![point(o - 3.0 * d + Vec3A::Y)]),
+            (
+                Ray::new(o, d),
+                6.0,
+                vec![point(o + 0.5 * d + Vec3A::Y * 0.2), point(o + 5.0 * d - Vec3A::X)],
+            ),
+            (Ray::new(o, d), 4.0, vec![spot]),
+        ]
+    }
+
+    /// The distribution function, from the angles (independent of `pdf`).
+    fn cdf(e: &Equiangular, t: f64) -> f64 {
+        let sum: f64 = e
+            .lights
+            .iter()
+            .map(|l| {
+                let t = t.clamp(f64::from(l.start), f64::from(l.end));
+                let theta = ((t - f64::from(l.foot)) / f64::from(l.distance)).atan();
+                (theta - f64::from(l.theta_start)) / f64::from(l.span)
+            })
+            .sum();
+        sum / e.lights.len() as f64
+    }
+
+    #[test]
+    fn the_density_integrates_to_one_and_matches_its_distribution() {
+        for (k, (ray, end, lights)) in cases().into_iter().enumerate() {
+            let e = Equiangular::new(&ray, end, &lights).expect("lights");
+            let pdf = |t: f64| f64::from(e.pdf(t as f32));
+            let total = integrate_1d(&pdf, 0.0, f64::from(end), 20_000);
+            assert!((total - 1.0).abs() < 1e-3, "case {k}: integral {total}");
+            assert!((cdf(&e, f64::from(end)) - 1.0).abs() < 1e-5, "case {k}");
+            for x in [0.1, 0.9, 1.0, 2.5] {
+                let part = integrate_1d(&pdf, 0.0, x, 20_000);
+                assert!((part - cdf(&e, x)).abs() < 1e-3, "case {k}: {part} at {x}");
+            }
+        }
+    }
+
+    #[test]
+    fn samples_follow_the_density() {
+        for (k, (ray, end, lights)) in cases().into_iter().enumerate() {
+            let e = Equiangular::new(&ray, end, &lights).expect("lights");
+            let mut sampler = crate::rng::Sampler::new(5, k as u64, 0);
+            let samples: Vec<f64> = (0..200_000)
+                .map(|_| f64::from(e.sample(sampler.next_1d(), sampler.next_1d(), end)))
+                .collect();
+            // Bins over the stretch the lights reach (the density jumps at its ends).
+            let lo = e.lights.iter().map(|l| f64::from(l.start)).fold(f64::INFINITY, f64::min);
+            let hi = e.lights.iter().map(|l| f64::from(l.end)).fold(0.0, f64::max);
+            let edges = equal_mass_edges(&|t| cdf(&e, t), lo, hi, 64);
+            let pdf = |t: f64| f64::from(e.pdf(t as f32));
+            chi2_1d(&samples, &pdf, &edges, &[]).assert_pass(1e-4, &format!("case {k}"));
+        }
+    }
+
+    /// A spot light reaches exactly the points of the ray inside its cone: checked point by
+    /// point along random rays through random cones.
+    #[test]
+    fn a_spot_light_reaches_the_part_of_the_ray_inside_its_cone() {
+        let mut sampler = crate::rng::Sampler::new(8, 0, 0);
+        let mut u = || 2.0 * sampler.next_1d() - 1.0;
+        let (mut crossed, mut missed) = (0, 0);
+        for _ in 0..4000 {
+            let origin = 2.0 * Vec3A::new(u(), u(), u());
+            let direction = Vec3A::new(u(), u(), u()).normalize_or(Vec3A::X);
+            let ray = Ray::new(origin, direction);
+            let axis = Vec3A::new(u(), u(), u()).normalize_or(Vec3A::Y);
+            let cutoff = (5.0 + 80.0 * (0.5 + 0.5 * u())).to_radians();
+            let light = PointLight { position: Vec3A::ZERO, cone: Some((axis, cutoff.cos())) };
+            let end = 6.0;
+            let reach = light.reach(&ray, end);
+            let inside = |t: f32| {
+                let to = ray.at(t) - light.position;
+                to.dot(axis) >= to.length() * cutoff.cos()
+            };
+            let steps = 2000;
+            let mut any = false;
+            for i in 0..steps {
+                let t = end * (i as f32 + 0.5) / steps as f32;
+                // Points well inside or well outside the cone (rounding decides the rest).
+                let to = ray.at(t) - light.position;
+                let margin = (to.dot(axis) / to.length().max(1e-9) - cutoff.cos()).abs();
+                if margin < 1e-3 {
+                    continue;
+                }
+                let within = reach.is_some_and(|(a, b)| t >= a && t <= b);
+                assert_eq!(
+                    inside(t),
+                    within,
+                    "{ray:?}, axis {axis}, cutoff {cutoff}, t {t}: {reach:?}"
+                );
+                any |= inside(t);
+            }
+            if any { crossed += 1 } else { missed += 1 }
+        }
+        assert!(crossed > 400 && missed > 400, "crossed {crossed}, missed {missed}");
+    }
+
+    #[test]
+    fn no_stretch_or_no_light_gives_no_density() {
+        let ray = Ray::new(Vec3A::ZERO, Vec3A::X);
+        assert!(Equiangular::new(&ray, 0.0, &[point(Vec3A::Y)]).is_none());
+        assert!(Equiangular::new(&ray, 1.0, &[]).is_none());
+        // A spot light pointing away from the ray.
+        let away = PointLight { position: Vec3A::Y, cone: Some((Vec3A::Y, 0.9)) };
+        assert!(Equiangular::new(&ray, 1.0, &[away]).is_none());
+        // A light on the ray itself: a finite density, samples inside the stretch.
+        let e = Equiangular::new(&ray, 2.0, &[point(Vec3A::X)]).expect("a light");
+        assert!(e.pdf(0.5).is_finite() && e.pdf(1.0).is_finite());
+        let t = e.sample(0.3, 0.999_999, 2.0);
+        assert!((0.0..2.0).contains(&t));
+        // An infinite stretch: the angle ends at a right angle.
+        let e = Equiangular::new(&ray, f32::INFINITY, &[point(Vec3A::Y)]).expect("a light");
+        assert!((e.pdf(0.0) - 1.0 / std::f32::consts::FRAC_PI_2).abs() < 1e-6);
+    }
+}
