@@ -1,9 +1,11 @@
 //! `zerovar compare`: several methods (named sets of render options) on one scene with the
 //! same budget, training included in a guided method's time, their error against a
-//! reference at checkpoints, and tables (markdown, CSV, JSON) and images of the outcome.
+//! reference over several seeds, and tables (markdown, CSV, JSON) and images of the outcome.
 //!
-//! Checkpoints are separate renders at 1/8, 1/4, 1/2 and all of the budget with the same
-//! seed, so each point of a convergence curve is an honest equal-budget run.
+//! Single runs of firefly-prone scenes scatter by factors, so each method renders once per
+//! seed at the full budget and the tables give the median and the range of its relMSE,
+//! untrimmed and with the worst pixels left out. The first seed also renders at 1/8, 1/4 and
+//! 1/2 of the budget, each a separate equal-budget run, for the convergence curve.
 //!
 //! When the reference carries its standard error, efficiencies are computed from the excess
 //! relMSE (the reference's own noise taken out, see [`crate::metrics`]) provided every method's
@@ -45,6 +47,9 @@ pub enum CompareError {
     /// The reference does not fit.
     #[error("reference: {0}")]
     Metrics(#[from] MetricsError),
+    /// No seed to render with.
+    #[error("no seeds: give at least one")]
+    NoSeeds,
     /// A method's tracker cannot apply to the scene.
     #[error("method {method}: {message}")]
     Tracker {
@@ -178,8 +183,48 @@ pub struct Checkpoint {
     pub seconds: f64,
     /// Samples per pixel of the render phase.
     pub spp: u32,
-    /// Error against the reference.
+    /// Error against the reference (untrimmed).
     pub error: ImageError,
+}
+
+/// One render of a method at the full budget.
+#[derive(Clone, Debug, Serialize)]
+pub struct Run {
+    /// Its seed.
+    pub seed: u64,
+    /// Seconds in all, training included.
+    pub seconds: f64,
+    /// Samples per pixel of the render phase.
+    pub spp: u32,
+    /// Error against the reference, every pixel counted.
+    pub error: ImageError,
+    /// Error with the comparison's `trim` of worst pixels left out.
+    pub trimmed: ImageError,
+}
+
+/// The median of some runs' values and their range.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct Spread {
+    /// The median (the mean of the middle two for an even count).
+    pub median: f64,
+    /// The smallest.
+    pub min: f64,
+    /// The largest.
+    pub max: f64,
+}
+
+impl Spread {
+    /// The spread of `values` (NaN for none).
+    pub fn of(values: impl IntoIterator<Item = f64>) -> Self {
+        let mut v: Vec<f64> = values.into_iter().collect();
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n == 0 {
+            return Self { median: f64::NAN, min: f64::NAN, max: f64::NAN };
+        }
+        let median = if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) };
+        Self { median, min: v[0], max: v[n - 1] }
+    }
 }
 
 /// The outcome of one method.
@@ -187,17 +232,29 @@ pub struct Checkpoint {
 pub struct MethodResult {
     /// The method's name.
     pub name: String,
-    /// Convergence, the last point at the full budget.
+    /// One render per seed at the full budget.
+    pub runs: Vec<Run>,
+    /// Convergence of the first seed (renders at fractions of the budget), the last point
+    /// its full-budget run.
     pub checkpoints: Vec<Checkpoint>,
-    /// The error the efficiency is computed from, at the full budget (see `error_basis`).
+    /// relMSE over the runs.
+    pub rel_mse: Spread,
+    /// relMSE with the worst pixels left out, over the runs.
+    pub trimmed_rel_mse: Spread,
+    /// relMSE less the reference's own noise, over the runs (when the reference has its
+    /// standard error).
+    pub excess_rel_mse: Option<Spread>,
+    /// Seconds over the runs.
+    pub seconds: Spread,
+    /// The error the efficiency is computed from: the median relMSE (see `error_basis`).
     pub error: f64,
     /// Which relMSE `error` is.
     pub error_basis: ErrorBasis,
-    /// Efficiency 1 / (error x seconds) at the full budget.
+    /// Efficiency 1 / (error x median seconds).
     pub efficiency: f64,
     /// Efficiency relative to the first method's.
     pub speedup: f64,
-    /// The image at the full budget (not serialised).
+    /// The first seed's image at the full budget (not serialised).
     #[serde(skip)]
     pub image: Vec<[f32; 3]>,
 }
@@ -208,55 +265,101 @@ pub struct MethodResult {
 pub enum ErrorBasis {
     /// relMSE against the reference as it is.
     RelMse,
-    /// relMSE less the reference's own noise (every method's excess was resolved).
+    /// relMSE less the reference's own noise (every run's excess was resolved).
     Excess,
 }
 
-/// Runs every method with `budget` on `scene` and measures it against `reference`, whose
-/// per-pixel standard error `reference_error` (if known) is taken out of the relMSE.
-/// `progress(method index, fraction index)` reports as each checkpoint starts.
+/// What a comparison renders and how it measures.
+#[derive(Clone, Debug)]
+pub struct Protocol {
+    /// The budget of every run.
+    pub budget: Budget,
+    /// One run per seed for every method; the first also draws the convergence curve.
+    pub seeds: Vec<u64>,
+    /// The fraction of worst pixels the trimmed relMSE leaves out.
+    pub trim: f64,
+}
+
+/// Runs every method with the protocol's budget and seeds on `scene` and measures it against
+/// `reference`, whose per-pixel standard error `reference_error` (if known) is taken out of
+/// the relMSE. `progress(method index, step, steps)` reports as each render starts.
 pub fn run(
     scene: &mut Scene,
     reference: &[[f32; 3]],
     reference_error: Option<&[[f32; 3]]>,
     methods: &[Method],
-    budget: Budget,
-    trim: f64,
-    progress: &dyn Fn(usize, usize),
+    protocol: &Protocol,
+    progress: &dyn Fn(usize, usize, usize),
 ) -> Result<Vec<MethodResult>, CompareError> {
-    let measure = |image: &[[f32; 3]], reference: &[[f32; 3]], trim: f64| {
+    let measure = |image: &[[f32; 3]], trim: f64| {
         compare_with_reference_noise(image, reference, reference_error, trim)
     };
     // Size and trim are checked before any rendering.
-    measure(reference, reference, trim)?;
+    measure(reference, protocol.trim)?;
     let pixels = (scene.camera.resolution()[0] * scene.camera.resolution()[1]) as usize;
     if pixels != reference.len() {
         return Err(MetricsError::SizeMismatch { image: pixels, reference: reference.len() }.into());
     }
+    let Some(&first_seed) = protocol.seeds.first() else {
+        return Err(CompareError::NoSeeds);
+    };
+    let fractions = [0.125, 0.25, 0.5];
+    let steps = fractions.len() + protocol.seeds.len();
     let mut results = Vec::with_capacity(methods.len());
     for (mi, m) in methods.iter().enumerate() {
         scene.set_tracker(m.tracker).map_err(|e| CompareError::Tracker {
             method: m.name.clone(),
             message: e.to_string(),
         })?;
-        let mut checkpoints = Vec::new();
-        let mut image = Vec::new();
-        for (ci, fraction) in [0.125, 0.25, 0.5, 1.0].into_iter().enumerate() {
-            progress(mi, ci);
+        let render_at = |fraction: f64, seed: u64| {
             let mut options = m.options.clone();
-            options.budget = scaled(budget, fraction, &mut options);
+            options.seed = seed;
+            options.budget = scaled(protocol.budget, fraction, &mut options);
             let r = render(scene, &options, &|_, _| true)?;
             let seconds = r.seconds + r.training.as_ref().map_or(0.0, |t| t.seconds);
+            Ok::<_, CompareError>((r, seconds))
+        };
+        let mut checkpoints = Vec::new();
+        for (ci, &fraction) in fractions.iter().enumerate() {
+            progress(mi, ci, steps);
+            let (r, seconds) = render_at(fraction, first_seed)?;
             checkpoints.push(Checkpoint {
                 fraction,
                 seconds,
                 spp: r.spp,
-                error: measure(&r.image, reference, trim)?,
+                error: measure(&r.image, 0.0)?,
             });
-            image = r.image;
         }
+        let mut runs = Vec::with_capacity(protocol.seeds.len());
+        let mut image = Vec::new();
+        for (k, &seed) in protocol.seeds.iter().enumerate() {
+            progress(mi, fractions.len() + k, steps);
+            let (r, seconds) = render_at(1.0, seed)?;
+            let error = measure(&r.image, 0.0)?;
+            if k == 0 {
+                checkpoints.push(Checkpoint { fraction: 1.0, seconds, spp: r.spp, error });
+                image = r.image.clone();
+            }
+            runs.push(Run {
+                seed,
+                seconds,
+                spp: r.spp,
+                error,
+                trimmed: measure(&r.image, protocol.trim)?,
+            });
+        }
+        let excess = runs
+            .iter()
+            .map(|r| r.error.reference_noise.map(|n| n.excess.all))
+            .collect::<Option<Vec<f64>>>()
+            .map(Spread::of);
         results.push(MethodResult {
             name: m.name.clone(),
+            rel_mse: Spread::of(runs.iter().map(|r| r.error.rel_mse.all)),
+            trimmed_rel_mse: Spread::of(runs.iter().map(|r| r.trimmed.rel_mse.all)),
+            excess_rel_mse: excess,
+            seconds: Spread::of(runs.iter().map(|r| r.seconds)),
+            runs,
             checkpoints,
             error: 0.0,
             error_basis: ErrorBasis::RelMse,
@@ -266,17 +369,16 @@ pub fn run(
         });
     }
     let resolved = |r: &MethodResult| {
-        r.checkpoints.last().and_then(|c| c.error.reference_noise).is_some_and(|n| n.resolved())
+        r.runs.iter().all(|run| run.error.reference_noise.is_some_and(|n| n.resolved()))
     };
     let basis = if results.iter().all(resolved) { ErrorBasis::Excess } else { ErrorBasis::RelMse };
     for r in &mut results {
-        let c = r.checkpoints.last().expect("four checkpoints");
         r.error_basis = basis;
-        r.error = match (basis, c.error.reference_noise) {
-            (ErrorBasis::Excess, Some(n)) => n.excess.all,
-            _ => c.error.rel_mse.all,
+        r.error = match (basis, r.excess_rel_mse) {
+            (ErrorBasis::Excess, Some(e)) => e.median,
+            _ => r.rel_mse.median,
         };
-        r.efficiency = 1.0 / (r.error * c.seconds).max(1e-300);
+        r.efficiency = 1.0 / (r.error * r.seconds.median).max(1e-300);
     }
     scene
         .set_tracker(TrackerChoice::Auto)
@@ -300,78 +402,117 @@ fn scaled(budget: Budget, fraction: f64, options: &mut RenderOptions) -> Budget 
     }
 }
 
-/// The results as a markdown table; with the reference's noise known, a column of the excess
-/// relMSE (plus or minus its standard error) and a line saying which relMSE the efficiencies use.
-pub fn markdown(results: &[MethodResult]) -> String {
-    let noise = |r: &MethodResult| r.checkpoints.last().and_then(|c| c.error.reference_noise);
-    let with_noise = results.iter().all(|r| noise(r).is_some());
+/// A spread as `median [min, max]`.
+fn spread(s: &Spread) -> String {
+    format!("{:.3e} [{:.2e}, {:.2e}]", s.median, s.min, s.max)
+}
+
+/// The results as a markdown table: per method the median over the seeds and the range of
+/// relMSE, of relMSE less the reference's noise (when known) and of relMSE with the worst
+/// pixels left out, and a line saying which relMSE the efficiencies use.
+pub fn markdown(results: &[MethodResult], trim: f64) -> String {
+    let with_noise = results.iter().all(|r| r.excess_rel_mse.is_some());
+    let seeds = results.first().map_or(0, |r| r.runs.len());
     let mut s = String::from("| method | seconds | spp | relMSE |");
     if with_noise {
         s += " relMSE - reference noise |";
     }
-    s += " MSE | MAPE | SMAPE | efficiency | speed-up |\n|---|---|---|---|";
+    s += &format!(
+        " relMSE without the worst {}% | MAPE | SMAPE | efficiency | speed-up |\n|---|---|---|---|",
+        100.0 * trim
+    );
     if with_noise {
         s += "---|";
     }
     s += "---|---|---|---|---|\n";
     for r in results {
-        let c = r.checkpoints.last().expect("checkpoints");
-        let e = &c.error;
-        s += &format!("| {} | {:.2} | {} | {:.4e} |", r.name, c.seconds, c.spp, e.rel_mse.all);
-        if let Some(n) = noise(r).filter(|_| with_noise) {
-            s += &format!(" {:.4e} ± {:.1e} |", n.excess.all, n.excess_std_error);
-        }
+        let spp = Spread::of(r.runs.iter().map(|run| f64::from(run.spp)));
         s += &format!(
-            " {:.4e} | {:.4} | {:.4} | {:.4e} | {:.2} |\n",
-            e.mse.all, e.mape.all, e.smape.all, r.efficiency, r.speedup
+            "| {} | {:.2} | {:.0} | {} |",
+            r.name,
+            r.seconds.median,
+            spp.median,
+            spread(&r.rel_mse)
+        );
+        if let Some(e) = r.excess_rel_mse.filter(|_| with_noise) {
+            s += &format!(" {} |", spread(&e));
+        }
+        let mape = Spread::of(r.runs.iter().map(|run| run.error.mape.all));
+        let smape = Spread::of(r.runs.iter().map(|run| run.error.smape.all));
+        s += &format!(
+            " {} | {:.4} | {:.4} | {:.4e} | {:.2} |\n",
+            spread(&r.trimmed_rel_mse),
+            mape.median,
+            smape.median,
+            r.efficiency,
+            r.speedup
         );
     }
-    if let Some(n) = results.first().and_then(noise) {
+    s += &format!(
+        "\nMedians over {seeds} seed{} [smallest, largest]; efficiency is 1 / (median relMSE x median seconds), training included.\n",
+        if seeds == 1 { "" } else { "s" }
+    );
+    if let Some(n) = results.first().and_then(|r| r.runs[0].error.reference_noise) {
         s += &format!(
-            "\nThe reference's own noise adds {:.4e} to every relMSE (its standard error layer). ",
+            "The reference's own noise adds {:.4e} to every relMSE (its standard error layer). ",
             n.share.all
         );
         s += match results.first().map(|r| r.error_basis) {
             Some(ErrorBasis::Excess) => "Efficiency and speed-up use the relMSE less it.\n",
             _ => {
-                "Some method's error is not resolved above it (excess below twice its standard error), so efficiency and speed-up use the raw relMSE: render a longer reference.\n"
+                "Some run's error is not resolved above it (excess below twice its standard error), so efficiency and speed-up use the raw relMSE: render a longer reference.\n"
             }
         };
     }
     s
 }
 
-/// Every checkpoint of every method as CSV.
+/// Every run and checkpoint of every method as CSV (`fraction` 1 rows are the runs).
 pub fn csv(results: &[MethodResult]) -> String {
     let mut s = String::from(
-        "method,fraction,seconds,spp,relmse,mse,mape,smape,relmse_r,relmse_g,relmse_b,reference_noise,relmse_excess,relmse_excess_se\n",
+        "method,seed,fraction,seconds,spp,relmse,relmse_trimmed,mse,mape,smape,relmse_r,relmse_g,relmse_b,reference_noise,relmse_excess,relmse_excess_se\n",
     );
+    let mut row = |name: &str,
+                   seed: u64,
+                   fraction: f64,
+                   seconds: f64,
+                   spp: u32,
+                   e: &ImageError,
+                   trimmed: Option<f64>| {
+        s += &format!(
+            "{name},{seed},{fraction},{seconds:.4},{spp},{:.6e},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}",
+            e.rel_mse.all,
+            trimmed.map_or(String::new(), |t| format!("{t:.6e}")),
+            e.mse.all,
+            e.mape.all,
+            e.smape.all,
+            e.rel_mse.rgb[0],
+            e.rel_mse.rgb[1],
+            e.rel_mse.rgb[2]
+        );
+        // Empty cells when the reference's noise is unknown.
+        s += &match e.reference_noise {
+            Some(n) => {
+                format!(",{:.6e},{:.6e},{:.6e}\n", n.share.all, n.excess.all, n.excess_std_error)
+            }
+            None => ",,,\n".into(),
+        };
+    };
     for r in results {
-        for c in &r.checkpoints {
-            let e = &c.error;
-            s += &format!(
-                "{},{},{:.4},{},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e},{:.6e}\n",
-                r.name,
-                c.fraction,
-                c.seconds,
-                c.spp,
-                e.rel_mse.all,
-                e.mse.all,
-                e.mape.all,
-                e.smape.all,
-                e.rel_mse.rgb[0],
-                e.rel_mse.rgb[1],
-                e.rel_mse.rgb[2]
+        let seed = r.runs[0].seed;
+        for c in r.checkpoints.iter().filter(|c| c.fraction < 1.0) {
+            row(&r.name, seed, c.fraction, c.seconds, c.spp, &c.error, None);
+        }
+        for run in &r.runs {
+            row(
+                &r.name,
+                run.seed,
+                1.0,
+                run.seconds,
+                run.spp,
+                &run.error,
+                Some(run.trimmed.rel_mse.all),
             );
-            // Empty cells when the reference's noise is unknown.
-            s.pop();
-            s += &match e.reference_noise {
-                Some(n) => format!(
-                    ",{:.6e},{:.6e},{:.6e}\n",
-                    n.share.all, n.excess.all, n.excess_std_error
-                ),
-                None => ",,,\n".into(),
-            };
         }
     }
     s
@@ -381,6 +522,14 @@ pub fn csv(results: &[MethodResult]) -> String {
 mod tests {
     use super::*;
     use crate::render::Budget;
+
+    #[test]
+    fn spreads_are_medians_and_ranges() {
+        let s = Spread::of([3.0, 1.0, 2.0]);
+        assert_eq!((s.median, s.min, s.max), (2.0, 1.0, 3.0));
+        assert_eq!(Spread::of([4.0, 1.0, 2.0, 10.0]).median, 3.0);
+        assert!(Spread::of([]).median.is_nan());
+    }
 
     #[test]
     fn method_options_parse_and_bad_ones_are_named() {

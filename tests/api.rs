@@ -252,3 +252,53 @@ fn a_scene_built_in_code_renders_exactly_as_its_file() {
     let unknown = fog_sphere_in_code([40, 30]).global_medium("smoke").build().unwrap_err();
     assert!(unknown.to_string().contains("smoke"), "{unknown}");
 }
+
+/// A `.vol` file of `channels` values per voxel over a 2x2x1 grid.
+fn vol_file(channels: i32, values: &[f32]) -> Vec<u8> {
+    let mut b = b"VOL\x03".to_vec();
+    for i in [1i32, 2, 2, 1, channels] {
+        b.extend_from_slice(&i.to_le_bytes());
+    }
+    for v in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0].iter().chain(values) {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b
+}
+
+/// An RGB extinction grid whose channels keep one proportion (as Mitsuba scenes of chromatic
+/// smoke give them) renders exactly as its largest channel times that colour; one whose
+/// channels do not is refused, naming the voxel.
+#[test]
+fn a_proportional_rgb_density_is_a_density_times_a_colour() {
+    let density = [0.8f32, 0.2, 0.0, 1.0];
+    let colour = [0.5f32, 1.0, 0.25];
+    let rgb: Vec<f32> = density.iter().flat_map(|d| colour.map(|c| d * c)).collect();
+    crate::common::write("rgb-density.vol", vol_file(3, &rgb));
+    crate::common::write("grey-density.vol", vol_file(1, &density));
+    let text = |file: &str, sigma_t: &str| {
+        format!(
+            "[camera]\norigin = [0, 0.5, 3]\ntarget = [0, 0, 0]\nfov = 40\nresolution = [8, 6]\n\n\
+             [media.m]\ntype = \"grid\"\ndensity = \"{file}\"\nsigma_t = {sigma_t}\nscale = 3\nalbedo = 0.8\n\
+             transform = [{{ translate = [-0.5, -0.5, -0.5] }}]\n\n\
+             [[shapes]]\ntype = \"cube\"\ntransform = [{{ scale = 0.5 }}]\nbsdf = {{ type = \"null\" }}\ninterior = \"m\"\n\n\
+             [[lights]]\ntype = \"constant\"\nradiance = 1\n"
+        )
+    };
+    let load = |name: &str, body: String| {
+        let path = crate::common::write(name, &body);
+        zerovar::scene::load(&path, &[])
+    };
+    let a = load("rgb.toml", text("rgb-density.vol", "1")).unwrap_or_else(|e| panic!("{e}"));
+    let b = load("grey.toml", text("grey-density.vol", "[0.5, 1.0, 0.25]"))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let options = RenderOptions::unguided(Budget::Samples(8), 4);
+    let ra = render(&a, &options, &|_, _| true).unwrap();
+    let rb = render(&b, &options, &|_, _| true).unwrap();
+    assert_eq!(ra.image, rb.image, "the same medium either way");
+    // Voxel (1, 0, 0) out of proportion.
+    let mut bad = rgb.clone();
+    bad[4] = 0.5;
+    crate::common::write("bad-density.vol", vol_file(3, &bad));
+    let e = load("bad.toml", text("bad-density.vol", "1")).expect_err("refused").to_string();
+    assert!(e.contains("voxel (1, 0, 0)") && e.contains("one colour"), "{e}");
+}

@@ -339,25 +339,42 @@ fn reference_and_compare_end_to_end() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
     let (a, b) = (&json[0], &json[1]);
     assert_eq!(a["checkpoints"].as_array().unwrap().len(), 4);
-    // The same method twice: the same image, so the same error; the speed-up is a timing ratio.
-    assert_eq!(
-        a["checkpoints"][3]["error"]["rel_mse"]["all"],
-        b["checkpoints"][3]["error"]["rel_mse"]["all"]
-    );
+    // Three seeds by default, from the scene's seed on; the first seed's run is the
+    // convergence curve's last point.
+    let runs = a["runs"].as_array().unwrap();
+    let seeds: Vec<u64> = runs.iter().map(|r| r["seed"].as_u64().unwrap()).collect();
+    assert_eq!(seeds.len(), 3);
+    assert!(seeds.windows(2).all(|w| w[1] == w[0] + 1), "{seeds:?}");
+    assert_eq!(runs[0]["error"], a["checkpoints"][3]["error"]);
+    // The same method twice: the same images, so the same errors; the speed-up is a timing
+    // ratio.
+    for (ra, rb) in runs.iter().zip(b["runs"].as_array().unwrap()) {
+        assert_eq!(ra["error"]["rel_mse"]["all"], rb["error"]["rel_mse"]["all"]);
+        // Leaving pixels out lowers the error.
+        let trimmed = ra["trimmed"]["rel_mse"]["all"].as_f64().unwrap();
+        assert!(trimmed <= ra["error"]["rel_mse"]["all"].as_f64().unwrap());
+    }
     let speedup = b["speedup"].as_f64().unwrap();
     assert!(speedup > 0.25 && speedup < 4.0, "self speed-up {speedup}");
     // The reference carries its standard error: its share is reported and taken out.
-    let e = &a["checkpoints"][3]["error"];
-    let share = e["reference_noise"]["share"]["all"].as_f64().unwrap();
-    let excess = e["reference_noise"]["excess"]["all"].as_f64().unwrap();
-    let rel_mse = e["rel_mse"]["all"].as_f64().unwrap();
-    assert!(share > 0.0 && (rel_mse - share - excess).abs() <= 1e-12 * rel_mse, "{e}");
+    let mut used = Vec::new();
     let basis = a["error_basis"].as_str().unwrap();
-    let used = if basis == "excess" { excess } else { rel_mse };
-    assert_eq!(a["error"].as_f64().unwrap(), used, "{basis}");
+    for run in runs {
+        let e = &run["error"];
+        let share = e["reference_noise"]["share"]["all"].as_f64().unwrap();
+        let excess = e["reference_noise"]["excess"]["all"].as_f64().unwrap();
+        let rel_mse = e["rel_mse"]["all"].as_f64().unwrap();
+        assert!(share > 0.0 && (rel_mse - share - excess).abs() <= 1e-12 * rel_mse, "{e}");
+        used.push(if basis == "excess" { excess } else { rel_mse });
+    }
+    // The efficiency's error is the runs' median.
+    used.sort_by(f64::total_cmp);
+    assert_eq!(a["error"].as_f64().unwrap(), used[1], "{basis}");
+    assert!(a["rel_mse"]["min"].as_f64().unwrap() <= a["rel_mse"]["max"].as_f64().unwrap());
     let table = String::from_utf8_lossy(&o.stdout);
-    assert_eq!(table.lines().count(), 7, "{table}");
+    assert_eq!(table.lines().count(), 8, "{table}");
     assert!(table.lines().take(5).skip(2).all(|l| l.split('|').count() == 12), "{table}");
+    assert!(table.contains("Medians over 3 seeds"), "{table}");
     assert!(table.contains("The reference's own noise adds"), "{table}");
     // A reference without a standard-error layer (a render's EXR) keeps the raw relMSE, and
     // says so.

@@ -4,15 +4,17 @@ it against a zerovar reference, for bench/run.sh's Mitsuba column.
 
 Usage:
     python3 tools/mitsuba-bench.py SCENE.xml --reference REF.exr --seconds S
-        [--threads T] [--variant V] [--integrator NAME] [--pass-spp K] [--trim F] [--block B]
-        [--out IMAGE.exr] [--json RESULT.json] [--csv RESULT.csv]
+        [--threads T] [--variant V] [--integrator NAME] [--pass-spp K] [--seed S] [--trim F]
+        [--block B] [--out IMAGE.exr] [--json RESULT.json] [--csv RESULT.csv]
 
 The budget starts before `import mitsuba` and so includes Python's start of Mitsuba, the scene
 load and, with an LLVM variant, the JIT compilation of the first pass; these are reported
 separately (`load_seconds`, `first_pass_seconds`). Passes of K samples per pixel (default 4),
-each with its own seed (0, 1, 2, ...), are accumulated until the budget is spent: as zerovar's
-`--time` does, a pass is started only while the time left exceeds the time one sample per pixel
-took, and the last pass is shortened to fit.
+each with its own seed, are accumulated until the budget is spent: as zerovar's `--time` does, a
+pass is started only while the time left exceeds the time one sample per pixel took, and the
+last pass is shortened to fit. Pass k of a run with `--seed S` (default 0) uses Mitsuba's seed
+S * 1000003 + k, so that runs with different S share no pass (a run has far fewer than 1000003
+passes) and give independent estimates, as bench/run.sh's several seeds need.
 
 Variant: `auto` (the default) tries `llvm_ad_rgb` and falls back to `scalar_rgb` if the LLVM
 backend cannot start or crashes (Dr.Jit needs a shared libLLVM; LLVM 14 and 15 abort on the
@@ -21,8 +23,9 @@ the variable is unset). Which variant ran is printed and recorded.
 
 Metrics are zerovar's (src/metrics.rs), computed the same way: per pixel and channel, relMSE =
 (I - R)^2 / (R^2 + 1e-3), MSE = (I - R)^2, MAPE = |I - R| / (|R| + 1e-3), SMAPE = 2 |I - R| /
-(|I| + |R| + 1e-3), each averaged over the pixels after dropping the fraction `--trim` with the
-largest value (per metric and channel), and over channels for `all`. The image is compared as
+(|I| + |R| + 1e-3), each averaged over the pixels and over channels for `all`. `error` counts
+every pixel; `trimmed` is the same with the fraction `--trim` of pixels with the largest value
+left out (per metric and channel), as `zerovar compare` reports both. The image is compared as
 32-bit floats, as zerovar compares its own.
 
 If the reference has a standard-error layer (`zerovar reference` writes one), the tool also
@@ -52,6 +55,7 @@ import time
 EPSILON = 1e-3  # zerovar's metrics::EPSILON
 LLVM_VARIANT = "llvm_ad_rgb"
 SCALAR_VARIANT = "scalar_rgb"
+SEED_STRIDE = 1000003  # seeds of run S: S * SEED_STRIDE + pass; more passes than this never fit a budget
 
 
 def parse_args(argv):
@@ -64,7 +68,9 @@ def parse_args(argv):
     p.add_argument("--integrator", help="set the scene's $integrator default (the bench scenes: volpath, "
                    "or volpathmis for spectral MIS in chromatic media)")
     p.add_argument("--pass-spp", type=int, default=4, help="samples per pixel of each pass (default 4)")
-    p.add_argument("--trim", type=float, default=0.0, help="fraction of worst pixels dropped per metric (default 0)")
+    p.add_argument("--seed", type=int, default=0, help="run seed S: pass k uses Mitsuba's seed S * 1000003 + k (default 0)")
+    p.add_argument("--trim", type=float, default=0.0, help="fraction of worst pixels the `trimmed` metrics drop, "
+                   "per metric and channel (default 0; `error` counts every pixel)")
     p.add_argument("--block", type=int, default=1, help="average BxB pixel blocks for the z-scores (default 1)")
     p.add_argument("--out", help="output EXR (default: beside the reference, <scene>-mitsuba.exr)")
     p.add_argument("--json", help="write the result as JSON to this file")
@@ -78,6 +84,9 @@ def parse_args(argv):
         errors.append(f"--threads {a.threads}: give at least one thread")
     if a.pass_spp < 1:
         errors.append(f"--pass-spp {a.pass_spp}: give at least one sample per pixel")
+    # Mitsuba's seed is a 32-bit unsigned integer: S * 1000003 plus the passes must fit.
+    if not 0 <= a.seed * SEED_STRIDE + SEED_STRIDE - 1 < 2**32:
+        errors.append(f"--seed {a.seed}: give a seed from 0 to {2**32 // SEED_STRIDE - 1}")
     if not 0.0 <= a.trim < 0.5:
         errors.append(f"--trim {a.trim}: the trimmed fraction must lie in [0, 0.5)")
     if a.block < 1:
@@ -282,7 +291,8 @@ def worker(a):
             break
         k = a.pass_spp if per_spp is None else int(min(a.pass_spp, max(1, left // per_spp)))
         t0 = time.perf_counter()
-        img = np.array(mi.render(scene, spp=k, seed=passes), dtype=np.float64)[:, :, :3]
+        img = np.array(mi.render(scene, spp=k, seed=a.seed * SEED_STRIDE + passes),
+                       dtype=np.float64)[:, :, :3]
         dt = time.perf_counter() - t0
         if passes <= 1:
             # The first pass includes JIT compilation: the second replaces its timing.
@@ -309,7 +319,9 @@ def worker(a):
     data = np.concatenate([mean, stderr], axis=2).astype(np.float32)
     mi.Bitmap(data, pixel_format=mi.Bitmap.PixelFormat.MultiChannel,
               channel_names=["R", "G", "B", "stderr.R", "stderr.G", "stderr.B"]).write(a.out)
-    image32 = mean.astype(np.float32)
+    image32 = mean.astype(np.float32).reshape(-1, 3)
+    ref32 = ref.reshape(-1, 3)
+    ref_se32 = None if ref_se is None else ref_se.reshape(-1, 3)
     result = {
         "renderer": "mitsuba3",
         "mitsuba": mi.__version__,
@@ -324,9 +336,10 @@ def worker(a):
         "threads": a.threads,
         "spp": spp,
         "passes": passes,
+        "seed": a.seed,
         "trim": a.trim,
-        "error": image_error(image32.reshape(-1, 3), ref.reshape(-1, 3), a.trim,
-                             None if ref_se is None else ref_se.reshape(-1, 3)),
+        "error": image_error(image32, ref32, 0.0, ref_se32),
+        "trimmed": image_error(image32, ref32, a.trim, ref_se32),
         "image": a.out,
     }
     if ref_se is not None and passes > 1:
@@ -343,13 +356,20 @@ def worker(a):
 
 def report(result, a):
     e = result["error"]
+    t = result["trimmed"]
     print(f"{result['scene']}: Mitsuba {result['mitsuba']} {result['variant']} "
           f"({result['integrator']}), {result['threads']} threads")
     print(f"  {result['seconds']:.2f} s of {result['budget_seconds']:.2f} s: load "
           f"{result['load_seconds']:.2f} s, first pass (JIT included) "
-          f"{result['first_pass_seconds']:.2f} s; {result['spp']} spp in {result['passes']} passes")
-    print(f"  relMSE {e['rel_mse']['all']:.4e}  MSE {e['mse']['all']:.4e}  MAPE "
-          f"{e['mape']['all']:.4f}  SMAPE {e['smape']['all']:.4f}  (trim {result['trim']})")
+          f"{result['first_pass_seconds']:.2f} s; {result['spp']} spp in {result['passes']} passes "
+          f"(seed {result['seed']})")
+    print(f"  relMSE {e['rel_mse']['all']:.4e} ({t['rel_mse']['all']:.4e} without the worst "
+          f"{100 * result['trim']:g}%)  MSE {e['mse']['all']:.4e}  MAPE {e['mape']['all']:.4f}  "
+          f"SMAPE {e['smape']['all']:.4f}")
+    n = e.get("reference_noise")
+    if n:
+        print(f"  relMSE less the reference's noise {n['excess']['all']:.4e} ± "
+              f"{n['excess_std_error']:.1e} (the noise adds {n['share']['all']:.4e})")
     g = result.get("agreement")
     if "agreement_skipped" in result:
         print(f"  agreement not checked: {result['agreement_skipped']}")
@@ -365,11 +385,12 @@ def report(result, a):
             f.write(line + "\n")
     if a.csv:
         cols = ["scene", "variant", "threads", "budget_seconds", "seconds", "load_seconds",
-                "first_pass_seconds", "spp", "passes", "trim"]
+                "first_pass_seconds", "spp", "passes", "seed", "trim"]
         metrics = ["rel_mse", "mse", "mape", "smape"]
         with open(a.csv, "w") as f:
-            f.write(",".join(cols + metrics) + "\n")
-            f.write(",".join([str(result[c]) for c in cols] + [repr(e[m]["all"]) for m in metrics]) + "\n")
+            f.write(",".join(cols + metrics + [m + "_trimmed" for m in metrics]) + "\n")
+            f.write(",".join([str(result[c]) for c in cols] + [repr(e[m]["all"]) for m in metrics]
+                             + [repr(t[m]["all"]) for m in metrics]) + "\n")
     print(line)
 
 
@@ -388,8 +409,9 @@ def main(argv):
     notes = []
     for variant in variants:
         args = [a.scene, "--reference", a.reference, "--seconds", str(a.seconds), "--threads",
-                str(a.threads), "--variant", variant, "--pass-spp", str(a.pass_spp), "--trim",
-                str(a.trim), "--block", str(a.block), "--out", a.out, "--worker"]
+                str(a.threads), "--variant", variant, "--pass-spp", str(a.pass_spp), "--seed",
+                str(a.seed), "--trim", str(a.trim), "--block", str(a.block), "--out", a.out,
+                "--worker"]
         if a.integrator:
             args += ["--integrator", a.integrator]
         proc = subprocess.run([sys.executable, os.path.abspath(__file__)] + args, env=env,

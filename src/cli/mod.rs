@@ -89,14 +89,18 @@ struct CompareArgs {
     /// Directory for the tables and images.
     #[arg(long, default_value = "compare")]
     out: PathBuf,
-    /// Fraction of worst pixels dropped from each metric.
-    #[arg(long, default_value_t = 0.0)]
+    /// Fraction of worst pixels the trimmed relMSE leaves out (the other metrics count every
+    /// pixel).
+    #[arg(long, default_value_t = 0.001)]
     trim: f64,
+    /// Renders of each method, with seeds from --seed on; the tables give medians and ranges.
+    #[arg(long, default_value_t = 3)]
+    seeds: u32,
     /// The window of `crops.png`, as X,Y,WIDTH,HEIGHT in pixels [default: a quarter of the
     /// image in each direction, where the first method's relative error is largest].
     #[arg(long, value_name = "X,Y,W,H")]
     crop: Option<String>,
-    /// Seed of the methods' renders [default: the scene's].
+    /// The first seed of the methods' renders [default: the scene's].
     #[arg(long)]
     seed: Option<u64>,
     /// Worker threads [default: all cores].
@@ -339,6 +343,9 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     if !(0.0..0.5).contains(&a.trim) {
         bail!("--trim {}: give a fraction in [0, 0.5)", a.trim);
     }
+    if a.seeds == 0 || a.seeds > 1000 {
+        bail!("--seeds {}: give 1 to 1000 renders per method", a.seeds);
+    }
     let defines = parse_defines(&a.scene.define)?;
     let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
     let budget = validate_budget(&a.budget, scene.settings().spp)?;
@@ -372,18 +379,22 @@ fn run_compare(a: CompareArgs) -> Result<()> {
             a.reference.display()
         );
     }
+    let protocol = zerovar::compare::Protocol {
+        budget,
+        seeds: (0..u64::from(a.seeds)).map(|k| base.seed.wrapping_add(k)).collect(),
+        trim: a.trim,
+    };
     let results = run(
         &mut scene,
         &reference,
         reference_error.as_deref(),
         &methods,
-        budget,
-        a.trim,
-        &|m, c| {
-            eprintln!("{}: checkpoint {}/4", methods[m].name, c + 1);
+        &protocol,
+        &|m, step, steps| {
+            eprintln!("{}: render {}/{steps}", methods[m].name, step + 1);
         },
     )?;
-    let table = markdown(&results);
+    let table = markdown(&results, a.trim);
     print!("{table}");
     let write = |name: &str, text: String| -> Result<()> {
         let path = a.out.join(name);
@@ -404,8 +415,8 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     let mut strip_w = w as usize;
     for r in &results {
         let meta = ImageMetadata {
-            spp: r.checkpoints.last().map_or(0, |c| c.spp),
-            seconds: r.checkpoints.last().map_or(0.0, |c| c.seconds),
+            spp: r.runs[0].spp,
+            seconds: r.runs[0].seconds,
             seed: base.seed,
             scene: a.scene.scene.display().to_string(),
         };

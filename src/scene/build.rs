@@ -418,6 +418,8 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
         }
         "grid" => {
             cx.only("grid media", &[("noise", d.noise.is_some())])?;
+            // A three-channel density is a grey density times this colour.
+            let mut tint = Spectrum::ONE;
             // A `.vdb` grid brings its own placement, which the medium's transform then moves.
             let mut placement = None;
             let density = match cx.required("density", &d.density)? {
@@ -432,7 +434,11 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
                     placement = Some(cube_to_vdb);
                     grid
                 }
-                DensityDesc::File(f) => read_grid(cx, &cx.file(&f), &[1])?,
+                DensityDesc::File(f) => {
+                    let (grid, colour) = read_density(cx, &cx.file(&f))?;
+                    tint = colour;
+                    grid
+                }
                 DensityDesc::Constant(v) => {
                     if !(v >= 0.0 && v.is_finite()) {
                         return cx.err(format!("density {v} must be finite and non-negative"));
@@ -466,7 +472,7 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
                 to_world,
                 DensityField::Grid(density),
                 1.0,
-                sigma_t,
+                sigma_t * tint,
                 albedo,
             )))
         }
@@ -511,6 +517,68 @@ fn read_grid(cx: &Ctx<'_>, file: &Path, channels: &[usize]) -> Result<Grid> {
         ));
     }
     Ok(Grid::new(vol))
+}
+
+/// A `.vol` density of one channel, or of three whose channels are in one proportion
+/// everywhere (a density times a colour, as an RGB extinction grid for Mitsuba often is):
+/// the grid of its largest channel and the colour (white for one channel). zerovar's grid media
+/// are a density times a colour, so other RGB grids are refused.
+fn read_density(cx: &Ctx<'_>, file: &Path) -> Result<(Grid, Spectrum)> {
+    let vol = VolGrid::read(file).or_else(|e| cx.err(e.to_string()))?;
+    match vol.channels {
+        1 => Ok((Grid::new(vol), Spectrum::ONE)),
+        3 => {
+            let [r, g, b] = [0, 1, 2]
+                .map(|c| vol.data.iter().skip(c).step_by(3).fold(0.0f32, |m, &v| m.max(v)));
+            let top = r.max(g).max(b);
+            if top <= 0.0 {
+                let data = vec![0.0; vol.data.len() / 3];
+                return Ok((
+                    Grid::new(
+                        VolGrid::new(vol.resolution, 1, data).or_else(|e| cx.err(e.to_string()))?,
+                    ),
+                    Spectrum::ONE,
+                ));
+            }
+            let colour = Spectrum::new(r, g, b) / top;
+            let main = if r == top {
+                0
+            } else if g == top {
+                1
+            } else {
+                2
+            };
+            let mut density = Vec::with_capacity(vol.data.len() / 3);
+            for (i, v) in vol.data.chunks_exact(3).enumerate() {
+                let d = v[main];
+                for c in 0..3 {
+                    let expected = d * colour[c];
+                    if (v[c] - expected).abs()
+                        > 1e-4 * top.max(f32::MIN_POSITIVE) + 1e-5 * v[c].abs()
+                    {
+                        let [x, y, z] = [
+                            i % vol.resolution[0],
+                            i / vol.resolution[0] % vol.resolution[1],
+                            i / (vol.resolution[0] * vol.resolution[1]),
+                        ];
+                        return cx.err(format!(
+                            "{}: voxel ({x}, {y}, {z}) holds {v:?}, not in the proportion {:?} of the grid's other voxels; zerovar's grid media are a density times one colour: give a one-channel density and the colour as the medium's extinction",
+                            file.display(),
+                            colour.to_array()
+                        ));
+                    }
+                }
+                density.push(d);
+            }
+            let grid =
+                VolGrid::new(vol.resolution, 1, density).or_else(|e| cx.err(e.to_string()))?;
+            Ok((Grid::new(grid), colour))
+        }
+        n => cx.err(format!(
+            "{}: has {n} channels; expected 1 (or 3 in one proportion)",
+            file.display()
+        )),
+    }
 }
 
 /// Whether a density file is an OpenVDB file (by its extension, as OpenVDB's tools decide).
