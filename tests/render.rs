@@ -282,3 +282,31 @@ fn area_light_reaches_a_far_off_axis_surface_point() {
     }
     est.assert_matches(expected, 4.0, "floor radiance far off the area light's axis");
 }
+
+/// With the default training share, training passes take at most a quarter of a sample
+/// budget and the render phase the rest, so the image holds the budget's samples in all;
+/// below `MIN_ADAPTIVE_SPP` adaptive guiding renders unguided rather than spend the budget on
+/// training and its pilot.
+#[test]
+fn training_shares_a_sample_budget() {
+    use zerovar::render::{MIN_ADAPTIVE_SPP, TrainingStop};
+    let s = scene(SMALL);
+    let mut o = RenderOptions::new(Budget::Samples(64), 3);
+    o.guiding.adaptive = false;
+    let r = render(&s, &o, &|_, _| true).unwrap();
+    let t = r.training.expect("guided renders train");
+    // Passes of 1, 2, 4, 8 (15 spp); one of 16 more would overrun 16.
+    assert_eq!((t.passes, t.spp, t.stop), (4, 15, TrainingStop::Budget));
+    assert_eq!(t.spp + r.spp, 64);
+    // A share that leaves room for a last, partial pass: 1 + 2 + 4 + 8 + 12 = 27 of 0.3 x 90.
+    o.budget = Budget::Samples(90);
+    o.guiding.train = TrainBudget::Share(0.3);
+    let r = render(&s, &o, &|_, _| true).unwrap();
+    assert_eq!(r.training.as_ref().map(|t| (t.passes, t.spp)), Some((5, 27)));
+    assert_eq!(r.spp, 63);
+    let few =
+        render(&s, &RenderOptions::new(Budget::Samples(MIN_ADAPTIVE_SPP - 1), 3), &|_, _| true)
+            .unwrap();
+    assert!(few.training.is_none() && few.selection.is_none(), "{:?}", few.training);
+    assert_eq!(few.spp, MIN_ADAPTIVE_SPP - 1);
+}

@@ -112,8 +112,8 @@ struct CompareArgs {
 struct GuidingArgs {
     /// Guided decisions: off, directions, distances, rr, full, or a +-joined list
     /// (e.g. directions+rr); auto is full guiding (or roulette alone, where that pays
-    /// better) in the tiles where a pilot finds it pays [default: off; full for `train` and
-    /// with --field].
+    /// better) in the tiles where a pilot finds it pays, and unguided sampling elsewhere
+    /// [default: auto; full for `train` and with --field].
     #[arg(long, value_name = "MODE")]
     guiding: Option<String>,
     /// Probability of the guided strategy in each mixture with standard sampling in media, in
@@ -458,7 +458,7 @@ fn side_by_side(
 /// Validates guiding arguments. `field_use` names what needs a field (`train`, or rendering
 /// with `--field`): there guiding defaults to full, and `off` is an error.
 fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingOptions> {
-    let text = a.guiding.as_deref().unwrap_or(if field_use.is_some() { "full" } else { "off" });
+    let text = a.guiding.as_deref().unwrap_or(if field_use.is_some() { "full" } else { "auto" });
     let Some((components, adaptive)) = parse_guiding(text) else {
         bail!(
             "--guiding {text}: use off, directions, distances, rr, full, auto, or a +-joined list"
@@ -740,6 +740,15 @@ fn run_render(c: RenderCommand) -> Result<()> {
         c.output.display(),
         c.png.display()
     );
+    if options.guiding.adaptive && result.training.is_none() && c.field.is_none() {
+        // (Only with training sharing the budget: see `MIN_ADAPTIVE_SPP`.)
+        eprintln!(
+            "{}: adaptive guiding: {} spp are too few to train a field and choose where it pays ({} or more); rendered unguided",
+            c.scene.display(),
+            result.spp,
+            zerovar::render::MIN_ADAPTIVE_SPP
+        );
+    }
     if let Some(f) = &result.fireflies {
         eprint!("{}: {}", c.scene.display(), f.summary());
     }

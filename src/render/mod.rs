@@ -144,6 +144,15 @@ pub struct GuidingOptions {
     pub adaptive: bool,
 }
 
+impl GuidingOptions {
+    /// Adaptive guiding (`--guiding auto`, what `zerovar render` does by default): full
+    /// guiding, or roulette alone, in the tiles where a pilot after training finds that it
+    /// pays, unguided sampling elsewhere.
+    pub fn auto() -> Self {
+        Self { components: Components::FULL, adaptive: true, ..Self::default() }
+    }
+}
+
 impl Default for GuidingOptions {
     fn default() -> Self {
         Self {
@@ -196,6 +205,12 @@ pub struct RenderOptions {
 }
 
 impl RenderOptions {
+    /// Rendering with `budget` and `seed` on all cores, guided where it pays
+    /// ([`GuidingOptions::auto`]), as `zerovar render` does.
+    pub fn new(budget: Budget, seed: u64) -> Self {
+        Self { guiding: GuidingOptions::auto(), ..Self::unguided(budget, seed) }
+    }
+
     /// Unguided rendering with `budget` and `seed` on all cores.
     pub fn unguided(budget: Budget, seed: u64) -> Self {
         Self { budget, seed, threads: None, guiding: GuidingOptions::default(), fireflies: 0 }
@@ -375,7 +390,10 @@ pub fn render(
 ) -> Result<RenderResult, RenderError> {
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
-        if !options.guiding.components.any() {
+        let too_few = options.guiding.adaptive
+            && matches!(options.guiding.train, TrainBudget::Share(_))
+            && matches!(options.budget, Budget::Samples(n) if n < MIN_ADAPTIVE_SPP);
+        if !options.guiding.components.any() || too_few {
             return Ok(final_phase(scene, options, None, Vec::new(), threads, progress, None));
         }
         let mut training = Training::new(options)?;
@@ -398,6 +416,11 @@ pub fn render(
         Ok(guided_phase(scene, options, guidance, films, threads, progress, Some(report)))
     })
 }
+
+/// The fewest samples per pixel of a sample budget that adaptive guiding shares with its
+/// training and pilot: below it they would take most of the budget (the first pass, and a
+/// pilot of at least 2 spp per candidate, are whole samples), so the render is unguided.
+pub const MIN_ADAPTIVE_SPP: u32 = 16;
 
 /// Training passes after which adaptive guiding first pilots the field (1 + 2 spp).
 const EARLY_PILOT_PASSES: u32 = 2;
