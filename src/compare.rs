@@ -62,8 +62,9 @@ pub enum CompareError {
 
 impl Method {
     /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
-    /// distances, rr, full or a +-list), `alpha`, `surface-alpha`, `distance-alpha`, `train-passes`,
-    /// `train-time` (seconds), `tracker` (a `--tracker` name), `combine` (true, the default:
+    /// distances, rr, full, auto or a +-list), `alpha`, `surface-alpha`, `distance-alpha`,
+    /// `train-share` (a fraction of the budget), `train-passes`, `train-time` (seconds),
+    /// `tracker` (a `--tracker` name), `combine` (true, the default:
     /// training images join the result by inverse variance; false discards them, as
     /// `--training-images`), `parallax` (on, the default, or off: the field's lobes fixed per
     /// region, as `--parallax off`).

@@ -81,9 +81,9 @@ struct CompareArgs {
     reference: PathBuf,
     #[command(flatten)]
     budget: BudgetArgs,
-    /// A method: NAME=key:value,... with keys guiding, alpha, surface-alpha, distance-alpha, train-passes,
-    /// train-time, tracker, combine, parallax (repeatable) [default: unguided and
-    /// guided=guiding:full].
+    /// A method: NAME=key:value,... with keys guiding, alpha, surface-alpha, distance-alpha,
+    /// train-share, train-passes, train-time, tracker, combine, parallax (repeatable)
+    /// [default: unguided, guided=guiding:full and auto=guiding:auto].
     #[arg(long, value_name = "NAME=OPTIONS")]
     method: Vec<String>,
     /// Directory for the tables and images.
@@ -310,7 +310,8 @@ fn run_reference(a: ReferenceArgs) -> Result<()> {
         bail!("-o {}: the reference must be an .exr file", a.output.display());
     }
     let defines = parse_defines(&a.scene.define)?;
-    let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+    let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+    scene.set_tracker(a.scene.tracker)?;
     let budget = validate_budget(&a.budget, scene.settings().spp * 16)?;
     let seed = a.seed.unwrap_or(scene.settings().seed.wrapping_add(1_000_003));
     let options = RenderOptions { threads: a.threads, ..RenderOptions::unguided(budget, seed) };
@@ -353,11 +354,17 @@ fn run_compare(a: CompareArgs) -> Result<()> {
         threads: a.threads,
         ..RenderOptions::unguided(budget, a.seed.unwrap_or(scene.settings().seed))
     };
-    let methods = if a.method.is_empty() {
+    let mut methods = if a.method.is_empty() {
         Method::defaults(&base)
     } else {
         a.method.iter().map(|m| Method::parse(m, &base)).collect::<Result<Vec<_>, _>>()?
     };
+    // --tracker is every method's tracker unless the method names one.
+    for (k, m) in methods.iter_mut().enumerate() {
+        if !a.method.get(k).is_some_and(|spec| spec.contains("tracker:")) {
+            m.tracker = a.scene.tracker;
+        }
+    }
     let mut names = std::collections::HashSet::new();
     if let Some(m) = methods.iter().find(|m| !names.insert(m.name.clone())) {
         bail!("--method {}: two methods have this name", m.name);
@@ -517,7 +524,8 @@ fn run_train(a: TrainArgs) -> Result<()> {
         bail!("--threads 0: give at least one thread, or leave it out to use every core");
     }
     let defines = parse_defines(&a.scene.define)?;
-    let scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+    let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
+    scene.set_tracker(a.scene.tracker)?;
     let seed = a.seed.unwrap_or(scene.settings().seed);
     let options = RenderOptions {
         budget: validate_budget(&a.budget, scene.settings().spp)?,

@@ -1,6 +1,8 @@
 //! Guiding only where it pays (`--guiding auto`). After training, a short pilot renders every
-//! 16x16 tile both guided and unguided, each from streams of its own, and each tile keeps the
-//! strategy with the higher efficiency `1 / (relative variance per sample x cost per sample)`.
+//! 16x16 tile unguided and with each candidate (the requested components and, beside more,
+//! roulette alone), each from streams of its own; each candidate's best choice of tiles is
+//! the one with the highest efficiency `1 / (relative variance x cost)` of the image, and the
+//! candidate whose choice gains most wins.
 //!
 //! Cost is the pilot's counted work (`Counters`) weighted by per-operation costs, not wall
 //! time, so the choice, and with it the image, depends on the seed alone, whatever the thread
