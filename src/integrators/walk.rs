@@ -12,7 +12,7 @@
 
 use crate::accel::ShadowTrace;
 use crate::bsdf::Bsdf;
-use crate::guided::distance::{GuidedEvent, guided_flight};
+use crate::guided::distance::{ExtraCollision, GuidedEvent, guided_flight};
 use crate::guided::halo::{self, Halo};
 use crate::guided::{
     Components, DirectRecord, EXACT_PRODUCT_MIN_G, PRODUCT_MIN_G, RadianceCache, window,
@@ -20,8 +20,11 @@ use crate::guided::{
 use crate::integrators::trace::{Continuation, LightSource, Strategy, Trace, TraceEvent};
 use crate::lights::Light;
 use crate::math::{Frame, Ray, Spectrum, luminance, positive, power_heuristic};
+use crate::media::Medium;
+use crate::phase::PhaseFunction;
 use crate::rng::Sampler;
 use crate::scene::{Crossing, Scene, offset_origin};
+use crate::shapes::SurfaceHit;
 use crate::stats::Counters;
 use crate::tracking::{FlightEvent, sample_flight, transmittance_tracked};
 use arrayvec::ArrayVec;
@@ -160,7 +163,10 @@ pub fn radiance<C: RadianceCache>(
     l
 }
 
-#[allow(clippy::too_many_arguments)]
+/// One walk: a loop of named steps, as a volumetric path tracer reads. Each segment is a
+/// flight through the medium the path is in (which may end in a medium vertex), then, where
+/// the flight passed, the escape to infinite lights, or the surface hit: its emitter, a null
+/// crossing, or a surface vertex.
 fn walk<C: RadianceCache>(
     settings: &WalkSettings,
     scene: &Scene,
@@ -170,218 +176,38 @@ fn walk<C: RadianceCache>(
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spectrum {
-    let guide = settings.guide;
-    let window_rr = guide.roulette && ctx.pixel.is_some();
-    let mut l = Spectrum::ZERO;
+    let window_rr = settings.guide.roulette && ctx.pixel.is_some();
+    let mut w =
+        Walker { settings, scene, ctx, branches, sampler, counters, l: Spectrum::ZERO, window_rr };
     let mut nulls = 0u32;
     loop {
-        counters.segments += 1;
+        w.counters.segments += 1;
         let hit = scene.intersect(&s.ray, f32::INFINITY);
         let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
-
         // Guided decisions mix with standard sampling at `alpha`; without weight windows to
         // split heavy paths, only until they have compounded the path's weight past
         // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.
         let guiding = window_rr || s.guided_gain < MAX_GUIDED_GAIN;
         let alpha = if guiding { settings.alpha.min(MAX_ALPHA) } else { 0.0 };
         if let Some(m) = s.medium {
-            let mi = m as usize;
-            let medium = &scene.media[mi];
-            let mut delta_share = 1.0;
-            let (scatter_t, weight, emitted) = if guide.distances && alpha > 0.0 {
-                // Training paths take extra collisions too: their images are averaged into
-                // the result, and without them they were far noisier than the render's (light
-                // shaft, 32 spp of which 31 training: relMSE 0.027 -> 0.019 for 10% more
-                // time). One past the last depth would not estimate any light.
-                let extra_nee = (!scene.delta_lights.is_empty()
-                    && settings.max_depth.is_none_or(|d| s.depth + 1 < d))
-                .then_some(&scene.point_lights[..]);
-                let distance_alpha = settings.distance_alpha.min(MAX_ALPHA);
-                let f = guided_flight(
-                    medium,
-                    &s.ray,
-                    t_max,
-                    s.beta,
-                    distance_alpha,
-                    extra_nee,
-                    ctx.cache,
-                    sampler,
-                    counters,
-                );
-                s.guided_gain *= f.gain;
-                delta_share = f.delta_share;
-                if let Some(extra) = f.extra {
-                    counters.extra_collisions += 1;
-                    let p = s.ray.at(extra.t);
-                    let (phase, dir) = (medium.phase, s.ray.direction);
-                    let direct = sample_light(
-                        scene,
-                        p,
-                        None,
-                        s.medium,
-                        sampler,
-                        counters,
-                        NeeLights::Delta,
-                        |wi| Spectrum::splat(phase.eval(dir, wi)),
-                        |_| 0.0,
-                    );
-                    // Light along the segment from the last vertex: what that vertex's
-                    // continuation brought back, as the next vertex's next-event estimate is
-                    // (the two share the delta lights by MIS, so the field learns all of it).
-                    let c = s.beta * extra.weight * direct.contribution;
-                    l += c;
-                    record_contribution(ctx, c);
-                    trace_light(ctx, s.depth, LightSource::ExtraCollision, c, s.beta, &direct);
-                }
-                match f.event {
-                    GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted),
-                    GuidedEvent::Pass => (None, f.weight, f.emitted),
-                    GuidedEvent::Absorb => {
-                        record_contribution(ctx, f.emitted);
-                        trace_emission(ctx, s.depth, f.emitted, s.beta);
-                        return l + f.emitted;
+            match w.flight(&mut s, m, t_max, alpha) {
+                Flown::Scattered { t, delta_share } => {
+                    if !w.medium_vertex(&mut s, m, t, alpha, delta_share) {
+                        break;
                     }
+                    nulls = 0;
+                    continue;
                 }
-            } else {
-                let f = sample_flight(
-                    medium,
-                    scene.trackers[mi],
-                    &s.ray,
-                    t_max,
-                    s.beta,
-                    sampler,
-                    counters,
-                );
-                let t = match f.event {
-                    FlightEvent::Scatter { t } => Some(t),
-                    FlightEvent::Escape => None,
-                };
-                (t, f.weight, f.emitted)
-            };
-            l += emitted;
-            record_contribution(ctx, emitted);
-            trace_emission(ctx, s.depth, emitted, s.beta);
-            trace(ctx, || TraceEvent::Flight {
-                depth: s.depth,
-                guided: guide.distances && alpha > 0.0,
-                scattered: scatter_t.is_some(),
-                t: scatter_t.unwrap_or(t_max),
-                weight: luminance(weight),
-            });
-            s.beta *= weight;
-            if let Some(t) = scatter_t {
-                counters.medium_scatters += 1;
-                s.depth += 1;
-                if settings.max_depth.is_some_and(|d| s.depth >= d) || s.beta.max_element() <= 0.0 {
-                    break;
-                }
-                let p = s.ray.at(t);
-                let phase = medium.phase;
-                let dir = s.ray.direction;
-                let g = phase.mean_cosine();
-                let loaded = guide.any() && ctx.cache.load(p, sampler.next_1d());
-                let product =
-                    guide.directions && alpha > 0.0 && loaded && ctx.cache.product_hg(dir, g);
-                counters.field_lookups += u64::from(loaded);
-                if product && g.abs() >= EXACT_PRODUCT_MIN_G {
-                    counters.products += 1;
-                } else if product && g.abs() >= PRODUCT_MIN_G {
-                    counters.reweighted_products += 1;
-                }
-                let mix = Mixture::at(settings, alpha, product, scene, p);
-                // The phase function's value towards `wi` and the density of drawing `wi`.
-                let phase_and_pdf = |cache: &C, wi: Vec3A| {
-                    let pp = phase.eval(dir, wi);
-                    (pp, mix.pdf(cache, wi, pp))
-                };
-                let direct = sample_light(
-                    scene,
-                    p,
-                    None,
-                    s.medium,
-                    sampler,
-                    counters,
-                    NeeLights::All { delta_share },
-                    |wi| Spectrum::splat(phase.eval(dir, wi)),
-                    |wi| phase_and_pdf(ctx.cache, wi).1,
-                );
-                l += s.beta * direct.contribution;
-                // Earlier vertices learn it (this one learns it in its direct fluence).
-                record_contribution(ctx, s.beta * direct.contribution);
-                let c = s.beta * direct.contribution;
-                trace_light(ctx, s.depth, LightSource::NeeMedium, c, s.beta, &direct);
-                // (direction, its density, phase value / density, phase value)
-                let mut strategy = Strategy::Standard;
-                let (wi, pdf, weight, pp) = if mix.mixes() {
-                    let (chosen, u) = mix.choose(sampler.next_1d());
-                    strategy = chosen;
-                    let wi = match strategy {
-                        Strategy::Standard => phase.sample(dir, sampler.next_2d()).0,
-                        _ => mix.sample(ctx.cache, strategy, u, sampler.next_2d()),
-                    };
-                    let (pp, pdf) = phase_and_pdf(ctx.cache, wi);
-                    (wi, pdf, pp / pdf, pp)
-                } else {
-                    // Phase sampling draws exactly the phase function: the weight is one.
-                    let (wi, pp) = phase.sample(dir, sampler.next_2d());
-                    (wi, pp, 1.0, pp)
-                };
-                trace(ctx, || TraceEvent::Direction {
-                    depth: s.depth,
-                    surface: false,
-                    loaded,
-                    strategy,
-                    pdf,
-                    standard_pdf: pp,
-                    weight,
-                });
-                if !positive(pdf) {
-                    break;
-                }
-                s.beta *= weight;
-                s.guided_gain *= weight;
-                record_vertex(ctx, p, wi, pdf, s.beta, true, &direct);
-                s.ray = Ray::new(p, wi);
-                s.prev = Previous { position: p, pdf, delta: false };
-                nulls = 0;
-                let adjoint = if window_rr && loaded { adjoint(ctx.cache, wi) } else { 0.0 };
-                if !continue_path(settings, &mut s, adjoint, ctx, branches, sampler) {
-                    break;
-                }
-                continue;
-            }
-            if s.beta.max_element() <= 0.0 {
-                break;
+                Flown::Passed => {}
+                Flown::Ended => break,
             }
         }
-
         let Some(hit) = hit else {
-            for &li in &scene.infinite_lights {
-                let (le, pdf) = scene.lights[li as usize].eval_escaped(s.ray.direction);
-                if le.max_element() > 0.0 {
-                    let c = s.beta * le * mis_emitter(scene, s.prev, pdf);
-                    l += c;
-                    record_contribution(ctx, c);
-                    trace(ctx, || light_event(s.depth, LightSource::Escape, c, s.beta, 0.0));
-                }
-            }
+            w.escape(&s);
             break;
         };
-
-        let surface = &scene.surfaces[hit.shape as usize];
-        if let Some(li) = surface.light {
-            let light = &scene.lights[li as usize];
-            let le = light.eval_area(hit.ng, -s.ray.direction);
-            if le.max_element() > 0.0 {
-                let pdf = light.pdf_area(&scene.shapes, s.prev.position, hit.p, hit.ng);
-                let c = s.beta * le * mis_emitter(scene, s.prev, pdf);
-                l += c;
-                record_contribution(ctx, c);
-                trace(ctx, || light_event(s.depth, LightSource::EmitterHit, c, s.beta, hit.t));
-            }
-        }
-
-        if surface.bsdf == Bsdf::Null {
+        w.emitter_hit(&s, &hit);
+        if scene.surfaces[hit.shape as usize].bsdf == Bsdf::Null {
             nulls += 1;
             if nulls > MAX_NULL_CROSSINGS {
                 break;
@@ -390,110 +216,433 @@ fn walk<C: RadianceCache>(
             s.ray = Ray::new(offset_origin(hit.p, hit.ng, s.ray.direction), s.ray.direction);
             continue;
         }
-
-        counters.surface_scatters += 1;
-        s.depth += 1;
-        if settings.max_depth.is_some_and(|d| s.depth >= d) {
+        if !w.surface_vertex(&mut s, &hit, guiding) {
             break;
         }
-        let bsdf = surface.bsdf;
-        let frame = Frame::from_z(hit.ns);
-        let wo = frame.to_local(-s.ray.direction);
-        let smooth = bsdf.has_smooth_component();
-        let loaded = smooth && guide.any() && ctx.cache.load(hit.p, sampler.next_1d());
-        counters.field_lookups += u64::from(loaded);
+        nulls = 0;
+    }
+    w.l
+}
+
+/// What one walk's steps share: the settings and scene, the per-thread context (cache, pixel
+/// estimate, recorder, trace), the random stream, the counters, the split copies waiting, and
+/// the radiance found so far.
+struct Walker<'w, 'c, C> {
+    settings: &'w WalkSettings,
+    scene: &'w Scene,
+    ctx: &'w mut WalkContext<'c, C>,
+    branches: &'w mut Branches,
+    sampler: &'w mut Sampler,
+    counters: &'w mut Counters,
+    /// Radiance found so far.
+    l: Spectrum,
+    /// Whether weight windows steer roulette and splitting.
+    window_rr: bool,
+}
+
+/// How a flight through a medium ended.
+enum Flown {
+    /// In a real scattering collision at `t`, whose next-event estimate of delta lights
+    /// carries `delta_share` of them (the rest is an extra collision's).
+    Scattered { t: f32, delta_share: f32 },
+    /// Past the end of the ray: the surface or infinity comes next.
+    Passed,
+    /// The path ended (absorbed, or with no weight left).
+    Ended,
+}
+
+/// A scattering direction and what drawing it did to the path.
+#[derive(Clone, Copy)]
+struct DirectionSample {
+    wi: Vec3A,
+    /// The density it was drawn with (the mixture's).
+    pdf: f32,
+    /// Multiplies the path weight.
+    weight: Spectrum,
+    /// Multiplies the path's guided gain (standard density over the mixture's).
+    gain: f32,
+    /// The phase function's or BSDF's own density of it.
+    standard_pdf: f32,
+    strategy: Strategy,
+    /// Drawn from a delta lobe (and its relative index of refraction).
+    delta: bool,
+    eta: f32,
+}
+
+impl<C: RadianceCache> Walker<'_, '_, C> {
+    /// Light `c` found by the path (weight `beta`) at `depth`: added to the estimate, taught to
+    /// the training samples of the path's earlier vertices, and traced.
+    fn found(
+        &mut self,
+        c: Spectrum,
+        source: LightSource,
+        depth: u32,
+        beta: Spectrum,
+        distance: f32,
+    ) {
+        self.l += c;
+        record_contribution(self.ctx, c);
+        if c.max_element() > 0.0 {
+            trace(self.ctx, || light_event(depth, source, c, beta, distance));
+        }
+    }
+
+    /// The flight along the path's ray through medium `m` up to `t_max`: a guided flight with
+    /// its extra collision for delta lights when distances are guided, the medium's tracker
+    /// otherwise.
+    fn flight(&mut self, s: &mut PathState, m: u32, t_max: f32, alpha: f32) -> Flown {
+        let (scene, settings) = (self.scene, self.settings);
+        let medium = &scene.media[m as usize];
+        let guided = settings.guide.distances && alpha > 0.0;
+        let (scatter_t, weight, emitted, delta_share) = if guided {
+            // Training paths take extra collisions too: their images are averaged into the
+            // result. One past the last depth would not estimate any light.
+            let extra_nee = (!scene.delta_lights.is_empty()
+                && settings.max_depth.is_none_or(|d| s.depth + 1 < d))
+            .then_some(&scene.point_lights[..]);
+            let distance_alpha = settings.distance_alpha.min(MAX_ALPHA);
+            let f = guided_flight(
+                medium,
+                &s.ray,
+                t_max,
+                s.beta,
+                distance_alpha,
+                extra_nee,
+                self.ctx.cache,
+                self.sampler,
+                self.counters,
+            );
+            s.guided_gain *= f.gain;
+            if let Some(extra) = f.extra {
+                self.extra_collision(s, medium, extra);
+            }
+            match f.event {
+                GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted, f.delta_share),
+                GuidedEvent::Pass => (None, f.weight, f.emitted, f.delta_share),
+                GuidedEvent::Absorb => {
+                    self.found(f.emitted, LightSource::MediumEmission, s.depth, s.beta, 0.0);
+                    return Flown::Ended;
+                }
+            }
+        } else {
+            let tracker = scene.trackers[m as usize];
+            let f =
+                sample_flight(medium, tracker, &s.ray, t_max, s.beta, self.sampler, self.counters);
+            let t = match f.event {
+                FlightEvent::Scatter { t } => Some(t),
+                FlightEvent::Escape => None,
+            };
+            (t, f.weight, f.emitted, 1.0)
+        };
+        self.found(emitted, LightSource::MediumEmission, s.depth, s.beta, 0.0);
+        trace(self.ctx, || TraceEvent::Flight {
+            depth: s.depth,
+            guided,
+            scattered: scatter_t.is_some(),
+            t: scatter_t.unwrap_or(t_max),
+            weight: luminance(weight),
+        });
+        s.beta *= weight;
+        match scatter_t {
+            Some(t) => Flown::Scattered { t, delta_share },
+            None if s.beta.max_element() <= 0.0 => Flown::Ended,
+            None => Flown::Passed,
+        }
+    }
+
+    /// A guided flight's extra collision: next-event estimation of delta lights alone at its
+    /// point, weighted against the flight's own collision. The light is what the last vertex's
+    /// continuation brought back, as the next vertex's next-event estimate is (the two share
+    /// the delta lights by MIS, so the field learns all of it).
+    fn extra_collision(&mut self, s: &PathState, medium: &Medium, extra: ExtraCollision) {
+        self.counters.extra_collisions += 1;
+        let p = s.ray.at(extra.t);
+        let (phase, dir) = (medium.phase, s.ray.direction);
+        let direct = sample_light(
+            self.scene,
+            p,
+            None,
+            s.medium,
+            self.sampler,
+            self.counters,
+            NeeLights::Delta,
+            |wi| Spectrum::splat(phase.eval(dir, wi)),
+            |_| 0.0,
+        );
+        let c = s.beta * extra.weight * direct.contribution;
+        self.found(c, LightSource::ExtraCollision, s.depth, s.beta, direct.distance);
+    }
+
+    /// A real scattering collision at `t` in medium `m`: next-event estimation, then a new
+    /// direction from the vertex's mixture, and roulette or splitting. False when the path
+    /// ends here.
+    fn medium_vertex(
+        &mut self,
+        s: &mut PathState,
+        m: u32,
+        t: f32,
+        alpha: f32,
+        delta_share: f32,
+    ) -> bool {
+        let (scene, settings) = (self.scene, self.settings);
+        self.counters.medium_scatters += 1;
+        s.depth += 1;
+        if settings.max_depth.is_some_and(|d| s.depth >= d) || s.beta.max_element() <= 0.0 {
+            return false;
+        }
+        let (p, dir) = (s.ray.at(t), s.ray.direction);
+        let phase = scene.media[m as usize].phase;
+        let g = phase.mean_cosine();
+        let guide = settings.guide;
+        let loaded = guide.any() && self.ctx.cache.load(p, self.sampler.next_1d());
+        let product =
+            guide.directions && alpha > 0.0 && loaded && self.ctx.cache.product_hg(dir, g);
+        self.counters.field_lookups += u64::from(loaded);
+        if product && g.abs() >= EXACT_PRODUCT_MIN_G {
+            self.counters.products += 1;
+        } else if product && g.abs() >= PRODUCT_MIN_G {
+            self.counters.reweighted_products += 1;
+        }
+        let mix = Mixture::at(settings, alpha, product, scene, p);
+        let cache = &*self.ctx.cache;
+        let direct = sample_light(
+            scene,
+            p,
+            None,
+            s.medium,
+            self.sampler,
+            self.counters,
+            NeeLights::All { delta_share },
+            |wi| Spectrum::splat(phase.eval(dir, wi)),
+            |wi| mix.pdf(cache, wi, phase.eval(dir, wi)),
+        );
+        // Earlier vertices learn it (this one learns it in its direct fluence).
+        let c = s.beta * direct.contribution;
+        self.found(c, LightSource::NeeMedium, s.depth, s.beta, direct.distance);
+        let d = self.medium_direction(&mix, phase, dir);
+        self.trace_direction(s.depth, false, loaded, &d);
+        if !positive(d.pdf) {
+            return false;
+        }
+        s.beta *= d.weight;
+        s.guided_gain *= d.gain;
+        record_vertex(self.ctx, p, d.wi, d.pdf, s.beta, true, &direct);
+        s.ray = Ray::new(p, d.wi);
+        s.prev = Previous { position: p, pdf: d.pdf, delta: false };
+        self.go_on(s, loaded, d.wi)
+    }
+
+    /// A direction at a medium vertex from `mix` around the phase function (the weight is one
+    /// where phase sampling draws alone: it draws exactly the phase function).
+    fn medium_direction(
+        &mut self,
+        mix: &Mixture,
+        phase: PhaseFunction,
+        dir: Vec3A,
+    ) -> DirectionSample {
+        let (wi, pdf, pp, strategy) = if mix.mixes() {
+            let (strategy, u) = mix.choose(self.sampler.next_1d());
+            let wi = match strategy {
+                Strategy::Standard => phase.sample(dir, self.sampler.next_2d()).0,
+                _ => mix.sample(self.ctx.cache, strategy, u, self.sampler.next_2d()),
+            };
+            let pp = phase.eval(dir, wi);
+            (wi, mix.pdf(self.ctx.cache, wi, pp), pp, strategy)
+        } else {
+            let (wi, pp) = phase.sample(dir, self.sampler.next_2d());
+            (wi, pp, pp, Strategy::Standard)
+        };
+        let ratio = if mix.mixes() { pp / pdf } else { 1.0 };
+        DirectionSample {
+            wi,
+            pdf,
+            weight: Spectrum::splat(ratio),
+            gain: ratio,
+            standard_pdf: pp,
+            strategy,
+            delta: false,
+            eta: 1.0,
+        }
+    }
+
+    /// Roulette or splitting after the direction `wi` was chosen at a vertex (by the weight
+    /// window where the cache was `loaded` there). False when the path ends.
+    fn go_on(&mut self, s: &mut PathState, loaded: bool, wi: Vec3A) -> bool {
+        let adjoint = if self.window_rr && loaded { adjoint(self.ctx.cache, wi) } else { 0.0 };
+        continue_path(self.settings, s, adjoint, self.ctx, self.branches, self.sampler)
+    }
+
+    fn trace_direction(&mut self, depth: u32, surface: bool, loaded: bool, d: &DirectionSample) {
+        trace(self.ctx, || TraceEvent::Direction {
+            depth,
+            surface,
+            loaded,
+            strategy: d.strategy,
+            pdf: d.pdf,
+            standard_pdf: d.standard_pdf,
+            weight: luminance(d.weight),
+        });
+    }
+
+    /// The path escaped: infinite lights it sees, weighed against next-event estimation.
+    fn escape(&mut self, s: &PathState) {
+        for &li in &self.scene.infinite_lights {
+            let (le, pdf) = self.scene.lights[li as usize].eval_escaped(s.ray.direction);
+            if le.max_element() > 0.0 {
+                let c = s.beta * le * mis_emitter(self.scene, s.prev, pdf);
+                self.found(c, LightSource::Escape, s.depth, s.beta, 0.0);
+            }
+        }
+    }
+
+    /// The path hit a surface: the light it emits, weighed against next-event estimation.
+    fn emitter_hit(&mut self, s: &PathState, hit: &SurfaceHit) {
+        let scene = self.scene;
+        let Some(li) = scene.surfaces[hit.shape as usize].light else { return };
+        let light = &scene.lights[li as usize];
+        let le = light.eval_area(hit.ng, -s.ray.direction);
+        if le.max_element() > 0.0 {
+            let pdf = light.pdf_area(&scene.shapes, s.prev.position, hit.p, hit.ng);
+            let c = s.beta * le * mis_emitter(scene, s.prev, pdf);
+            self.found(c, LightSource::EmitterHit, s.depth, s.beta, hit.t);
+        }
+    }
+
+    /// A scattering surface: next-event estimation where the BSDF has a smooth part, then a
+    /// new direction from the vertex's mixture, and roulette or splitting. False when the path
+    /// ends here.
+    fn surface_vertex(&mut self, s: &mut PathState, hit: &SurfaceHit, guiding: bool) -> bool {
+        let (scene, settings) = (self.scene, self.settings);
+        self.counters.surface_scatters += 1;
+        s.depth += 1;
+        if settings.max_depth.is_some_and(|d| s.depth >= d) {
+            return false;
+        }
+        let at = SurfacePoint::new(scene, hit, s.ray.direction);
+        let guide = settings.guide;
+        let smooth = at.bsdf.has_smooth_component();
+        let loaded = smooth && guide.any() && self.ctx.cache.load(hit.p, self.sampler.next_1d());
+        self.counters.field_lookups += u64::from(loaded);
         // Surfaces have a share of their own (`render::DEFAULT_SURFACE_ALPHA`).
         let alpha = if guiding { settings.surface_alpha.min(MAX_ALPHA) } else { 0.0 };
-        let product = guide.directions && alpha > 0.0 && loaded && ctx.cache.product_cosine(hit.ns);
+        let product =
+            guide.directions && alpha > 0.0 && loaded && self.ctx.cache.product_cosine(hit.ns);
         let mix = if smooth {
             Mixture::at(settings, alpha, product, scene, hit.p)
         } else {
             Mixture::NONE
         };
-        let mix_pdf = |cache: &C, wi: Vec3A| mix.pdf(cache, wi, bsdf.pdf(wo, frame.to_local(wi)));
-        // BSDF sampling's density over the mixture's at `wi`.
-        let gain_at = |wi: Vec3A, pdf: f32| {
-            if mix.mixes() && pdf > 0.0 { bsdf.pdf(wo, frame.to_local(wi)) / pdf } else { 1.0 }
-        };
         let mut direct = DirectSample::NONE;
         if smooth {
+            let cache = &*self.ctx.cache;
             direct = sample_light(
                 scene,
                 hit.p,
                 Some(hit.ng),
                 s.medium,
-                sampler,
-                counters,
+                self.sampler,
+                self.counters,
                 NeeLights::All { delta_share: 1.0 },
-                |wi| bsdf.eval(wo, frame.to_local(wi), hit.uv),
-                |wi| mix_pdf(ctx.cache, wi),
+                |wi| at.eval(wi),
+                |wi| mix.pdf(cache, wi, at.pdf(wi)),
             );
-            l += s.beta * direct.contribution;
-            record_contribution(ctx, s.beta * direct.contribution);
             let c = s.beta * direct.contribution;
-            trace_light(ctx, s.depth, LightSource::NeeSurface, c, s.beta, &direct);
+            self.found(c, LightSource::NeeSurface, s.depth, s.beta, direct.distance);
         }
-        // The number that chooses the strategy, rescaled, also picks the BSDF's lobe (or the
-        // halo's light), so every branch sees a uniform number.
-        let (strategy, u1) = if mix.mixes() {
-            mix.choose(sampler.next_1d())
-        } else {
-            (Strategy::Standard, sampler.next_1d())
-        };
-        let (wi, weight, pdf, delta, eta) = if strategy != Strategy::Standard {
-            let wi = mix.sample(ctx.cache, strategy, u1, sampler.next_2d());
-            let pdf = mix_pdf(ctx.cache, wi);
-            let f = bsdf.eval(wo, frame.to_local(wi), hit.uv);
-            s.guided_gain *= gain_at(wi, pdf);
-            (wi, if pdf > 0.0 { f / pdf } else { Spectrum::ZERO }, pdf, false, 1.0)
-        } else {
-            let Some(bs) = bsdf.sample(wo, hit.uv, u1, sampler.next_2d()) else { break };
-            let wi = frame.to_world(bs.wi).normalize();
-            if mix.mixes() && !bs.delta {
-                let pdf = mix_pdf(ctx.cache, wi);
-                let f = bsdf.eval(wo, bs.wi, hit.uv);
-                s.guided_gain *= gain_at(wi, pdf);
-                (wi, f / pdf, pdf, false, bs.eta)
-            } else if mix.mixes() {
-                // A delta lobe is drawn with the standard share's probability.
-                let share = mix.standard_share();
-                (wi, bs.weight / share, bs.pdf * share, true, bs.eta)
-            } else {
-                (wi, bs.weight, bs.pdf, bs.delta, bs.eta)
-            }
-        };
+        let Some(d) = self.surface_direction(&mix, &at) else { return false };
         // Shading and geometric normals may disagree: a direction under the geometric
         // surface would leak light through it.
-        if !delta && (wi.dot(hit.ng) > 0.0) != (frame.to_local(wi).z > 0.0) {
-            break;
+        if !d.delta && (d.wi.dot(hit.ng) > 0.0) != (at.frame.to_local(d.wi).z > 0.0) {
+            return false;
         }
-        trace(ctx, || TraceEvent::Direction {
-            depth: s.depth,
-            surface: true,
-            loaded,
-            strategy,
-            pdf,
-            standard_pdf: if delta { pdf } else { bsdf.pdf(wo, frame.to_local(wi)) },
-            weight: luminance(weight),
-        });
-        if weight.max_element() <= 0.0 || !positive(pdf) {
-            break;
+        self.trace_direction(s.depth, true, loaded, &d);
+        if d.weight.max_element() <= 0.0 || !positive(d.pdf) {
+            return false;
         }
-        s.beta *= weight;
-        s.eta *= eta;
-        if !delta {
-            record_vertex(ctx, hit.p, wi, pdf, s.beta, false, &direct);
+        s.beta *= d.weight;
+        s.eta *= d.eta;
+        s.guided_gain *= d.gain;
+        if !d.delta {
+            record_vertex(self.ctx, hit.p, d.wi, d.pdf, s.beta, false, &direct);
         }
-        s.medium = scene.medium_after(&hit, wi);
-        s.ray = Ray::new(offset_origin(hit.p, hit.ng, wi), wi);
-        s.prev = Previous { position: hit.p, pdf, delta };
-        nulls = 0;
-        let adjoint = if window_rr && loaded { adjoint(ctx.cache, wi) } else { 0.0 };
-        if !continue_path(settings, &mut s, adjoint, ctx, branches, sampler) {
-            break;
-        }
+        s.medium = scene.medium_after(hit, d.wi);
+        s.ray = Ray::new(offset_origin(hit.p, hit.ng, d.wi), d.wi);
+        s.prev = Previous { position: hit.p, pdf: d.pdf, delta: d.delta };
+        self.go_on(s, loaded, d.wi)
     }
-    l
+
+    /// A direction at a surface from `mix` around the BSDF; `None` where the BSDF draws none.
+    /// The number that chooses the strategy, rescaled, also picks the BSDF's lobe (or the
+    /// halo's light), so every branch sees a uniform number.
+    fn surface_direction(&mut self, mix: &Mixture, at: &SurfacePoint) -> Option<DirectionSample> {
+        let (strategy, u1) = if mix.mixes() {
+            mix.choose(self.sampler.next_1d())
+        } else {
+            (Strategy::Standard, self.sampler.next_1d())
+        };
+        let cache = &*self.ctx.cache;
+        // BSDF sampling's density over the mixture's at `wi`.
+        let gain_at =
+            |wi: Vec3A, pdf: f32| if mix.mixes() && pdf > 0.0 { at.pdf(wi) / pdf } else { 1.0 };
+        let mixed = |wi: Vec3A, f: Spectrum, eta: f32, strategy: Strategy| {
+            let pdf = mix.pdf(cache, wi, at.pdf(wi));
+            let weight = if pdf > 0.0 { f / pdf } else { Spectrum::ZERO };
+            let (gain, standard_pdf) = (gain_at(wi, pdf), at.pdf(wi));
+            DirectionSample { wi, pdf, weight, gain, standard_pdf, strategy, delta: false, eta }
+        };
+        if strategy != Strategy::Standard {
+            let wi = mix.sample(cache, strategy, u1, self.sampler.next_2d());
+            return Some(mixed(wi, at.eval(wi), 1.0, strategy));
+        }
+        let bs = at.bsdf.sample(at.wo, at.uv, u1, self.sampler.next_2d())?;
+        let wi = at.frame.to_world(bs.wi).normalize();
+        let plain = |weight: Spectrum, pdf: f32, delta: bool| DirectionSample {
+            wi,
+            pdf,
+            weight,
+            gain: 1.0,
+            standard_pdf: pdf,
+            strategy,
+            delta,
+            eta: bs.eta,
+        };
+        Some(if mix.mixes() && !bs.delta {
+            mixed(wi, at.bsdf.eval(at.wo, bs.wi, at.uv), bs.eta, strategy)
+        } else if mix.mixes() {
+            // A delta lobe is drawn with the standard share's probability.
+            let share = mix.standard_share();
+            plain(bs.weight / share, bs.pdf * share, true)
+        } else {
+            plain(bs.weight, bs.pdf, bs.delta)
+        })
+    }
+}
+
+/// A surface hit as the BSDF sees it: the BSDF, its shading frame, the outgoing direction in
+/// that frame, and the texture coordinates.
+struct SurfacePoint {
+    bsdf: Bsdf,
+    frame: Frame,
+    wo: Vec3A,
+    uv: Vec2,
+}
+
+impl SurfacePoint {
+    fn new(scene: &Scene, hit: &SurfaceHit, ray_dir: Vec3A) -> Self {
+        let frame = Frame::from_z(hit.ns);
+        let bsdf = scene.surfaces[hit.shape as usize].bsdf;
+        SurfacePoint { bsdf, frame, wo: frame.to_local(-ray_dir), uv: hit.uv }
+    }
+
+    /// The BSDF's value towards the world direction `wi`.
+    fn eval(&self, wi: Vec3A) -> Spectrum {
+        self.bsdf.eval(self.wo, self.frame.to_local(wi), self.uv)
+    }
+
+    /// The BSDF sampling density of the world direction `wi`.
+    fn pdf(&self, wi: Vec3A) -> f32 {
+        self.bsdf.pdf(self.wo, self.frame.to_local(wi))
+    }
 }
 
 /// The mixture a vertex draws its direction from: the guided distribution (at `guided`, when
@@ -631,29 +780,6 @@ fn light_event(
     distance: f32,
 ) -> TraceEvent {
     TraceEvent::Light { depth, source, contribution: luminance(c), beta: luminance(beta), distance }
-}
-
-/// Traces a next-event estimate's contribution `c` when it found light.
-#[inline]
-fn trace_light<C>(
-    ctx: &mut WalkContext<'_, C>,
-    depth: u32,
-    source: LightSource,
-    c: Spectrum,
-    beta: Spectrum,
-    direct: &DirectSample,
-) {
-    if c.max_element() > 0.0 {
-        trace(ctx, || light_event(depth, source, c, beta, direct.distance));
-    }
-}
-
-/// Traces a flight's emitted radiance when there was some.
-#[inline]
-fn trace_emission<C>(ctx: &mut WalkContext<'_, C>, depth: u32, emitted: Spectrum, beta: Spectrum) {
-    if emitted.max_element() > 0.0 {
-        trace(ctx, || light_event(depth, LightSource::MediumEmission, emitted, beta, 0.0));
-    }
 }
 
 /// What a path is expected to bring back after its direction `wi` was chosen at the loaded
