@@ -706,25 +706,12 @@ pub fn guided_flight(
         return pass;
     };
     let (t, pdf, gain) = dist.sample(medium, cache, sampler, counters);
-    let scattering = |t: f32| {
-        let c = medium.coefficients(ray.at(t));
-        transmittance_homogeneous(sigma_t, t) * c.sigma_t * c.albedo
-    };
     let (mut delta_share, mut extra) = (1.0, None);
     if let Some(points) = extra_nee
         && !medium.is_emissive()
     {
         dist.aim_at(points);
-        if let Some((t, direct)) = dist.sample_direct(medium, cache, sampler) {
-            let own = dist.pdf(t, medium, cache, counters);
-            // A density that underflowed in every channel leaves nothing to weigh (never 0/0).
-            let weight = if direct > 0.0 {
-                scattering(t) * (power_heuristic(direct, own) / direct)
-            } else {
-                Spectrum::ZERO
-            };
-            extra = Some(ExtraCollision { t, weight });
-        }
+        extra = extra_collision(&mut dist, medium, ray, cache, sampler, counters);
         if let Some(t) = t
             && positive(pdf)
         {
@@ -743,19 +730,65 @@ pub fn guided_flight(
         return GuidedFlight::new(GuidedEvent::Absorb, Spectrum::ZERO, 1.0);
     }
     if !medium.is_emissive() {
+        let weight = homogeneous_scattering(medium, sigma_t, ray, t) / pdf;
         return GuidedFlight {
             delta_share,
             extra,
-            ..GuidedFlight::new(GuidedEvent::Scatter { t }, scattering(t) / pdf, gain)
+            ..GuidedFlight::new(GuidedEvent::Scatter { t }, weight, gain)
         };
     }
+    let w = transmittance_homogeneous(sigma_t, t) / pdf;
+    emissive_collision(medium, ray, t, (beta, w), lookup_u, gain, cache, sampler, counters)
+}
+
+/// `T(t) sigma_s(t)` in a homogeneous medium of extinction `sigma_t`.
+fn homogeneous_scattering(medium: &Medium, sigma_t: Spectrum, ray: &Ray, t: f32) -> Spectrum {
+    let c = medium.coefficients(ray.at(t));
+    transmittance_homogeneous(sigma_t, t) * c.sigma_t * c.albedo
+}
+
+/// A homogeneous flight's extra collision for delta lights, weighted against the flight's own
+/// collision by the power heuristic.
+fn extra_collision(
+    dist: &mut GuidedDistance,
+    medium: &Medium,
+    ray: &Ray,
+    cache: &mut impl RadianceCache,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> Option<ExtraCollision> {
+    let MediumKind::Homogeneous { sigma_t, .. } = medium.kind else { return None };
+    let (t, direct) = dist.sample_direct(medium, cache, sampler)?;
+    let own = dist.pdf(t, medium, cache, counters);
+    // A density that underflowed in every channel leaves nothing to weigh (never 0/0).
+    let weight = if direct > 0.0 {
+        homogeneous_scattering(medium, sigma_t, ray, t) * (power_heuristic(direct, own) / direct)
+    } else {
+        Spectrum::ZERO
+    };
+    Some(ExtraCollision { t, weight })
+}
+
+/// A real collision at `t` in an emissive homogeneous medium, reached by a path of throughput
+/// `beta` with the flight's transmittance over density `w`: absorb (and emit) or scatter, in
+/// proportion to what each brings back (the zero-variance choice), emission `sigma_a L_e`
+/// against in-scattered `sigma_s L_s`.
+#[allow(clippy::too_many_arguments)]
+fn emissive_collision(
+    medium: &Medium,
+    ray: &Ray,
+    t: f32,
+    (beta, w): (Spectrum, Spectrum),
+    lookup_u: f32,
+    gain: f32,
+    cache: &mut impl RadianceCache,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> GuidedFlight {
     let x = ray.at(t);
     let c = medium.coefficients(x);
-    let w = transmittance_homogeneous(sigma_t, t) / pdf;
     let sigma_s = c.sigma_t * c.albedo;
     let sigma_a = (c.sigma_t - sigma_s).max(Spectrum::ZERO);
-    // Absorb or scatter, in proportion to what each brings back (the zero-variance choice):
-    // emission sigma_a L_e against in-scattered sigma_s L_s.
     let emit = luminance(sigma_a * medium.emission);
     counters.field_lookups += 1;
     let scatter = if cache.load(x, lookup_u) {
