@@ -653,7 +653,7 @@ fn run_render(c: RenderCommand) -> Result<()> {
         budget,
         seed,
         threads: c.threads,
-        guiding: c.guiding,
+        guiding: c.guiding.clone(),
         fireflies: c.fireflies,
     };
     let bar = progress_bar(c.progress);
@@ -684,10 +684,25 @@ fn run_render(c: RenderCommand) -> Result<()> {
     };
     write_exr(&c.output, w, h, image, &meta)?;
     write_png(&c.png, w, h, image, c.exposure)?;
+    let stats = render_stats(&result, meta.scene.clone(), [w, h], seed);
+    if let Some(path) = &c.stats {
+        write_stats(path, &stats)?;
+    }
+    tell(&c, &options, &result, &stats);
+    Ok(())
+}
+
+/// The `--stats` report of a finished render.
+fn render_stats(
+    result: &zerovar::render::RenderResult,
+    scene: String,
+    resolution: [u32; 2],
+    seed: u64,
+) -> RenderStats {
     let mut stats = RenderStats::from_counters(&result.counters, result.seconds);
-    stats.scene = meta.scene.clone();
+    stats.scene = scene;
     stats.spp = result.spp;
-    stats.resolution = [w, h];
+    stats.resolution = resolution;
     stats.seed = seed;
     stats.threads = result.threads;
     stats.selection = result.selection.clone();
@@ -703,13 +718,21 @@ fn run_render(c: RenderCommand) -> Result<()> {
         share: t.seconds / (t.seconds + result.seconds).max(1e-9),
         stop: t.stop,
     });
-    if let Some(path) = &c.stats {
-        write_stats(path, &stats)?;
-    }
+    stats
+}
+
+/// What a finished render tells on stderr: training, adaptive guiding's choice, the render
+/// and where it went, the firefly table, and dropped samples.
+fn tell(
+    c: &RenderCommand,
+    options: &RenderOptions,
+    result: &zerovar::render::RenderResult,
+    stats: &RenderStats,
+) {
+    let name = c.scene.display();
     if let Some(t) = &stats.training {
         eprintln!(
-            "{}: trained {} passes ({} spp) in {:.2} s, {:.0}% of the render ({}): {} regions, {} lobes",
-            c.scene.display(),
+            "{name}: trained {} passes ({} spp) in {:.2} s, {:.0}% of the render ({}): {} regions, {} lobes",
             t.passes,
             t.spp,
             t.seconds,
@@ -722,26 +745,20 @@ fn run_render(c: RenderCommand) -> Result<()> {
     if let Some(sel) = &result.selection {
         if sel.stopped_training {
             eprintln!(
-                "{}: adaptive guiding found no tile worth guiding after {} training passes \
+                "{name}: adaptive guiding found no tile worth guiding after {} training passes \
                  (modelled gain {:.2}): rendered unguided",
-                c.scene.display(),
                 result.training.as_ref().map_or(0, |t| t.passes),
                 sel.gain
             );
         } else {
             eprintln!(
-                "{}: adaptive guiding guided {} of {} tiles with {} (modelled gain {:.2})",
-                c.scene.display(),
-                sel.guided_tiles,
-                sel.tiles,
-                sel.components,
-                sel.gain
+                "{name}: adaptive guiding guided {} of {} tiles with {} (modelled gain {:.2})",
+                sel.guided_tiles, sel.tiles, sel.components, sel.gain
             );
         }
     }
     eprintln!(
-        "{}: {} spp in {:.2} s ({:.0} paths/s) -> {} and {}",
-        c.scene.display(),
+        "{name}: {} spp in {:.2} s ({:.0} paths/s) -> {} and {}",
         result.spp,
         result.seconds,
         stats.paths_per_second,
@@ -751,19 +768,17 @@ fn run_render(c: RenderCommand) -> Result<()> {
     if options.guiding.adaptive && result.training.is_none() && c.field.is_none() {
         // (Only with training sharing the budget: see `MIN_ADAPTIVE_SPP`.)
         eprintln!(
-            "{}: adaptive guiding: {} spp are too few to train a field and choose where it pays ({} or more); rendered unguided",
-            c.scene.display(),
+            "{name}: adaptive guiding: {} spp are too few to train a field and choose where it pays ({} or more); rendered unguided",
             result.spp,
             zerovar::render::MIN_ADAPTIVE_SPP
         );
     }
     if let Some(f) = &result.fireflies {
-        eprint!("{}: {}", c.scene.display(), f.summary());
+        eprint!("{name}: {}", f.summary());
     }
     if stats.invalid_samples > 0 {
         eprintln!("warning: {} NaN or infinite samples were dropped", stats.invalid_samples);
     }
-    Ok(())
 }
 
 fn write_stats(path: &Path, stats: &RenderStats) -> Result<()> {

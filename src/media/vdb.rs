@@ -222,6 +222,73 @@ struct Leaf {
     mask: [u64; 8],
 }
 
+/// A grid's dense box of voxels being filled: the background, then tiles, then leaves, each
+/// value checked.
+struct Dense<'a> {
+    name: &'a str,
+    path: &'a Path,
+    min: [i64; 3],
+    res: [usize; 3],
+    data: Vec<f32>,
+}
+
+impl Dense<'_> {
+    fn index(&self, p: [i64; 3]) -> usize {
+        let d = [0, 1, 2].map(|a| (p[a] - self.min[a]) as usize);
+        (d[2] * self.res[1] + d[1]) * self.res[0] + d[0]
+    }
+
+    fn bad(&self, place: String, value: f32) -> VdbError {
+        VdbError::BadValue {
+            path: self.path.into(),
+            name: self.name.to_string(),
+            place,
+            value,
+            why: if value.is_finite() {
+                "densities cannot be negative"
+            } else {
+                "grids must hold finite numbers"
+            },
+        }
+    }
+
+    /// The box filled with the background, then the active tiles.
+    fn fill(&mut self, background: f32, tiles: &[Tile]) -> Result<()> {
+        if !(background.is_finite() && background >= 0.0) {
+            return Err(self.bad("the background".into(), background));
+        }
+        self.data = vec![background; self.res.iter().product()];
+        for t in tiles {
+            if !(t.value.is_finite() && t.value >= 0.0) {
+                return Err(self.bad(format!("the tile at index {:?}", t.origin), t.value));
+            }
+            for z in 0..t.size {
+                for y in 0..t.size {
+                    let row = self.index([t.origin[0], t.origin[1] + y, t.origin[2] + z]);
+                    self.data[row..row + t.size as usize].fill(t.value);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// A leaf's active voxels (`values` in the leaf's order, z fastest).
+    fn leaf(&mut self, leaf: &Leaf, mask: &[u64; 8], values: &[f32]) -> Result<()> {
+        for (i, v) in values.iter().enumerate() {
+            if mask[i / 64] >> (i % 64) & 1 == 1 {
+                let p = [i >> 6, (i >> 3) & 7, i & 7];
+                let p = [0, 1, 2].map(|a| leaf.origin[a] + p[a] as i64);
+                if !(v.is_finite() && *v >= 0.0) {
+                    return Err(self.bad(format!("voxel {p:?}"), *v));
+                }
+                let at = self.index(p);
+                self.data[at] = *v;
+            }
+        }
+        Ok(())
+    }
+}
+
 /// The grid's compression and value encoding.
 #[derive(Clone, Copy)]
 struct Coding {
@@ -346,6 +413,56 @@ impl<'a> Reader<'a> {
     }
 
     fn grid(mut self, wanted: Option<&str>) -> Result<VdbGrid> {
+        self.header()?;
+        let grids = self.descriptors()?;
+        let d = self.choose(&grids, wanted)?;
+        if !d.instance_of.is_empty() {
+            return self.unsupported(format!(
+                "grid `{}` is an instance of `{}`; re-save the file without instancing",
+                d.name, d.instance_of
+            ));
+        }
+        let half = d.kind.ends_with(HALF_SUFFIX);
+        self.seek(d.grid_pos, "the grid")?;
+        let flags = self.u32("grid compression")?;
+        if flags & !(COMPRESS_ZIP | COMPRESS_ACTIVE_MASK | COMPRESS_BLOSC) != 0 {
+            return self.corrupt(format!("unknown compression flags {flags:#x}"));
+        }
+        let coding = Coding { flags, half };
+        self.skip_metadata()?;
+        let index_to_world = self.transform()?;
+        let (background, tiles, leaves) = self.topology(coding)?;
+        let name = d.name.clone();
+        let (min, res) = self.active_box(&name, &tiles, &leaves)?;
+        let mut dense = Dense { name: &name, path: self.path, min, res, data: Vec::new() };
+        dense.fill(background, &tiles)?;
+        self.seek(d.block_pos, "the grid's voxel data")?;
+        for leaf in &leaves {
+            let mask = self.mask::<8>("leaf mask")?;
+            if mask != leaf.mask {
+                return self.corrupt(format!(
+                    "the leaf at index {:?} has different active voxels in its topology and its \
+                     data",
+                    leaf.origin
+                ));
+            }
+            let values = self.values(coding, 512, &mask)?;
+            dense.leaf(leaf, &mask, &values)?;
+        }
+        let data = dense.data;
+        Ok(VdbGrid {
+            name,
+            // The box fits in i32: it lies within the file's i32 coordinates.
+            index_min: min.map(|m| m as i32),
+            resolution: res,
+            data,
+            index_to_world,
+        })
+    }
+
+    /// The file header: magic number, format version (checked), library version, the
+    /// offsets flag, the file's UUID and its metadata.
+    fn header(&mut self) -> Result<()> {
         let magic = self.take(8, "header").map_err(|_| VdbError::NotVdb {
             path: self.path.into(),
             what: format!("{} bytes is too short for the header", self.b.len()),
@@ -375,7 +492,11 @@ impl<'a> Reader<'a> {
             return self.unsupported("grids without offsets are not supported; re-save the file");
         }
         self.take(36, "file UUID")?;
-        self.skip_metadata()?;
+        self.skip_metadata()
+    }
+
+    /// The file's grid descriptors, each with its offsets checked.
+    fn descriptors(&mut self) -> Result<Vec<Descriptor>> {
         let count = self.i32("grid count")?;
         let mut grids = Vec::new();
         for _ in 0..count.max(0) {
@@ -394,87 +515,7 @@ impl<'a> Reader<'a> {
             grids.push(Descriptor { name, kind, instance_of, grid_pos, block_pos });
             self.seek(end_pos, "the next grid")?;
         }
-        let d = self.choose(&grids, wanted)?;
-        if !d.instance_of.is_empty() {
-            return self.unsupported(format!(
-                "grid `{}` is an instance of `{}`; re-save the file without instancing",
-                d.name, d.instance_of
-            ));
-        }
-        let half = d.kind.ends_with(HALF_SUFFIX);
-        self.seek(d.grid_pos, "the grid")?;
-        let flags = self.u32("grid compression")?;
-        if flags & !(COMPRESS_ZIP | COMPRESS_ACTIVE_MASK | COMPRESS_BLOSC) != 0 {
-            return self.corrupt(format!("unknown compression flags {flags:#x}"));
-        }
-        let coding = Coding { flags, half };
-        self.skip_metadata()?;
-        let index_to_world = self.transform()?;
-        let (background, tiles, leaves) = self.topology(coding)?;
-        let name = d.name.clone();
-        let path = self.path;
-        let bad = |place: String, value: f32| VdbError::BadValue {
-            path: path.into(),
-            name: name.clone(),
-            place,
-            value,
-            why: if value.is_finite() {
-                "densities cannot be negative"
-            } else {
-                "grids must hold finite numbers"
-            },
-        };
-        if !(background.is_finite() && background >= 0.0) {
-            return Err(bad("the background".into(), background));
-        }
-        let (min, res) = self.active_box(&name, &tiles, &leaves)?;
-        let idx = |p: [i64; 3]| {
-            let d = [0, 1, 2].map(|a| (p[a] - min[a]) as usize);
-            (d[2] * res[1] + d[1]) * res[0] + d[0]
-        };
-        let mut data = vec![background; res.iter().product()];
-        for t in &tiles {
-            if !(t.value.is_finite() && t.value >= 0.0) {
-                return Err(bad(format!("the tile at index {:?}", t.origin), t.value));
-            }
-            for z in 0..t.size {
-                for y in 0..t.size {
-                    let row = idx([t.origin[0], t.origin[1] + y, t.origin[2] + z]);
-                    data[row..row + t.size as usize].fill(t.value);
-                }
-            }
-        }
-        self.seek(d.block_pos, "the grid's voxel data")?;
-        for leaf in &leaves {
-            let mask = self.mask::<8>("leaf mask")?;
-            if mask != leaf.mask {
-                return self.corrupt(format!(
-                    "the leaf at index {:?} has different active voxels in its topology and its \
-                     data",
-                    leaf.origin
-                ));
-            }
-            let values = self.values(coding, 512, &mask)?;
-            for (i, v) in values.iter().enumerate() {
-                if mask[i / 64] >> (i % 64) & 1 == 1 {
-                    // Leaves order their voxels z fastest.
-                    let p = [i >> 6, (i >> 3) & 7, i & 7];
-                    let p = [0, 1, 2].map(|a| leaf.origin[a] + p[a] as i64);
-                    if !(v.is_finite() && *v >= 0.0) {
-                        return Err(bad(format!("voxel {p:?}"), *v));
-                    }
-                    data[idx(p)] = *v;
-                }
-            }
-        }
-        Ok(VdbGrid {
-            name,
-            // The box fits in i32: it lies within the file's i32 coordinates.
-            index_min: min.map(|m| m as i32),
-            resolution: res,
-            data,
-            index_to_world,
-        })
+        Ok(grids)
     }
 
     /// The grid asked for, else `density`, else the only float grid.

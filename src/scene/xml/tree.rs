@@ -242,122 +242,7 @@ impl Reader<'_> {
             if !child.is_element() {
                 continue;
             }
-            let pos = at(child);
-            let tag = child.tag_name().name();
-            let new: Vec<Prop> = match tag {
-                "default" | "path" if !top => {
-                    return Err(pos.err(format!(
-                        "<{tag}> belongs directly inside <scene>, not inside <{}>",
-                        node.tag_name().name()
-                    )));
-                }
-                "default" => {
-                    self.attributes(child, &pos, &["name", "value"])?;
-                    let name = self.required(child, &pos, "name")?;
-                    let value = self.required(child, &pos, "value")?;
-                    if !self.declared.insert(name.clone()) {
-                        return Err(pos.err(format!(
-                            "<default name=\"{name}\"> is given twice; give each default once"
-                        )));
-                    }
-                    // A -D value was put there first and wins.
-                    self.params.entry(name).or_insert(value);
-                    vec![]
-                }
-                "include" => self.include(child, &pos, top)?,
-                "path" => {
-                    self.attributes(child, &pos, &["value"])?;
-                    let value = self.required(child, &pos, "value")?;
-                    let dir = pos.path.parent().unwrap_or(Path::new("")).join(&value);
-                    if !dir.is_dir() {
-                        return Err(pos.err(format!(
-                            "<path value=\"{value}\">: {} is not a directory",
-                            dir.display()
-                        )));
-                    }
-                    self.search.insert(0, dir);
-                    vec![]
-                }
-                "ref" if top => {
-                    return Err(pos.err(
-                        "<ref> belongs inside the object that uses the referenced one, not in \
-                         <scene>",
-                    ));
-                }
-                "ref" => {
-                    self.attributes(child, &pos, &["id", "name"])?;
-                    let id = self.required(child, &pos, "id")?;
-                    let Some(object) = self.ids.get(&id) else {
-                        return Err(pos.err(format!(
-                            "<ref id=\"{id}\"> names no object defined before it; define an \
-                             object with id=\"{id}\" earlier in the file"
-                        )));
-                    };
-                    let value = Value::Object(object.clone());
-                    vec![Prop {
-                        name: self.attr(child, &pos, "name")?.unwrap_or_default(),
-                        value,
-                        pos,
-                    }]
-                }
-                t if OBJECT_TAGS.contains(&t) => {
-                    self.attributes(child, &pos, &["type", "id", "name"])?;
-                    let Some(kind) = self.attr(child, &pos, "type")? else {
-                        return Err(pos.err(format!(
-                            "<{t}> needs a type attribute naming its plugin, e.g. \
-                             <{t} type=\"...\">"
-                        )));
-                    };
-                    let id = self.attr(child, &pos, "id")?;
-                    let name = self.attr(child, &pos, "name")?.unwrap_or_default();
-                    if self.nesting >= MAX_NESTING {
-                        return Err(pos.err(format!(
-                            "objects nested more than {MAX_NESTING} deep; no scene needs that"
-                        )));
-                    }
-                    self.nesting += 1;
-                    let inner = self.children(child, at, false);
-                    self.nesting -= 1;
-                    let inner = inner?;
-                    let object = Rc::new(Object {
-                        tag: t.to_string(),
-                        kind,
-                        id: id.clone(),
-                        pos: pos.clone(),
-                        props: inner,
-                    });
-                    if let Some(id) = id {
-                        if let Some(first) = self.ids.get(&id) {
-                            return Err(pos.err(format!(
-                                "id \"{id}\" is already used by {} at line {}; ids must be unique",
-                                first.describe(),
-                                first.pos.line
-                            )));
-                        }
-                        self.ids.insert(id, object.clone());
-                    }
-                    vec![Prop { name, value: Value::Object(object), pos }]
-                }
-                "transform" => {
-                    self.attributes(child, &pos, &["name"])?;
-                    let name = self.required(child, &pos, "name")?;
-                    vec![Prop { name, value: Value::Transform(self.transform(child, at)?), pos }]
-                }
-                "float" | "integer" | "boolean" | "string" | "rgb" | "spectrum" | "point"
-                | "vector" => {
-                    let value = self.value(child, &pos)?;
-                    vec![Prop { name: self.required(child, &pos, "name")?, value, pos }]
-                }
-                other => {
-                    return Err(pos.err(format!(
-                        "unknown element <{other}>; use an object ({}), a property \
-                         ({PROPERTY_TAGS}), {}",
-                        OBJECT_TAGS.join(", "),
-                        if top { "<default>, <path> or <include>" } else { "or <include>" }
-                    )));
-                }
-            };
-            for p in new {
+            for p in self.element(node, child, at, top)? {
                 if let Some(first) = props.iter().find(|q| !p.name.is_empty() && q.name == p.name) {
                     return Err(p.pos.err(format!(
                         "`{}` is given twice (first at line {}); give it once",
@@ -368,6 +253,147 @@ impl Reader<'_> {
             }
         }
         Ok(props)
+    }
+
+    /// The properties one child element of `node` gives (none for a `<default>` or `<path>`,
+    /// several for an `<include>`).
+    fn element(
+        &mut self,
+        node: Node<'_, '_>,
+        child: Node<'_, '_>,
+        at: &dyn Fn(Node<'_, '_>) -> Pos,
+        top: bool,
+    ) -> Result<Vec<Prop>> {
+        let pos = at(child);
+        let tag = child.tag_name().name();
+        Ok(match tag {
+            "default" | "path" if !top => {
+                return Err(pos.err(format!(
+                    "<{tag}> belongs directly inside <scene>, not inside <{}>",
+                    node.tag_name().name()
+                )));
+            }
+            "default" => {
+                self.declare_default(child, &pos)?;
+                vec![]
+            }
+            "include" => self.include(child, &pos, top)?,
+            "path" => {
+                self.path(child, &pos)?;
+                vec![]
+            }
+            "ref" if top => {
+                return Err(pos.err(
+                    "<ref> belongs inside the object that uses the referenced one, not in \
+                     <scene>",
+                ));
+            }
+            "ref" => vec![self.reference(child, pos)?],
+            t if OBJECT_TAGS.contains(&t) => vec![self.object(child, at, t, pos)?],
+            "transform" => {
+                self.attributes(child, &pos, &["name"])?;
+                let name = self.required(child, &pos, "name")?;
+                vec![Prop { name, value: Value::Transform(self.transform(child, at)?), pos }]
+            }
+            "float" | "integer" | "boolean" | "string" | "rgb" | "spectrum" | "point"
+            | "vector" => {
+                let value = self.value(child, &pos)?;
+                vec![Prop { name: self.required(child, &pos, "name")?, value, pos }]
+            }
+            other => {
+                return Err(pos.err(format!(
+                    "unknown element <{other}>; use an object ({}), a property \
+                     ({PROPERTY_TAGS}), {}",
+                    OBJECT_TAGS.join(", "),
+                    if top { "<default>, <path> or <include>" } else { "or <include>" }
+                )));
+            }
+        })
+    }
+
+    /// `<default name value>`: a value for `$name` unless `-D` gave one.
+    fn declare_default(&mut self, child: Node<'_, '_>, pos: &Pos) -> Result<()> {
+        self.attributes(child, pos, &["name", "value"])?;
+        let name = self.required(child, pos, "name")?;
+        let value = self.required(child, pos, "value")?;
+        if !self.declared.insert(name.clone()) {
+            return Err(pos
+                .err(format!("<default name=\"{name}\"> is given twice; give each default once")));
+        }
+        // A -D value was put there first and wins.
+        self.params.entry(name).or_insert(value);
+        Ok(())
+    }
+
+    /// `<path value>`: a directory searched for file names, before the ones given earlier.
+    fn path(&mut self, child: Node<'_, '_>, pos: &Pos) -> Result<()> {
+        self.attributes(child, pos, &["value"])?;
+        let value = self.required(child, pos, "value")?;
+        let dir = pos.path.parent().unwrap_or(Path::new("")).join(&value);
+        if !dir.is_dir() {
+            return Err(
+                pos.err(format!("<path value=\"{value}\">: {} is not a directory", dir.display()))
+            );
+        }
+        self.search.insert(0, dir);
+        Ok(())
+    }
+
+    /// `<ref id [name]>`: an object defined earlier.
+    fn reference(&mut self, child: Node<'_, '_>, pos: Pos) -> Result<Prop> {
+        self.attributes(child, &pos, &["id", "name"])?;
+        let id = self.required(child, &pos, "id")?;
+        let Some(object) = self.ids.get(&id) else {
+            return Err(pos.err(format!(
+                "<ref id=\"{id}\"> names no object defined before it; define an \
+                 object with id=\"{id}\" earlier in the file"
+            )));
+        };
+        let value = Value::Object(object.clone());
+        Ok(Prop { name: self.attr(child, &pos, "name")?.unwrap_or_default(), value, pos })
+    }
+
+    /// An object element (`<shape>`, `<bsdf>`, ...) with its properties, remembered by its id.
+    fn object(
+        &mut self,
+        child: Node<'_, '_>,
+        at: &dyn Fn(Node<'_, '_>) -> Pos,
+        t: &str,
+        pos: Pos,
+    ) -> Result<Prop> {
+        self.attributes(child, &pos, &["type", "id", "name"])?;
+        let Some(kind) = self.attr(child, &pos, "type")? else {
+            return Err(pos.err(format!(
+                "<{t}> needs a type attribute naming its plugin, e.g. <{t} type=\"...\">"
+            )));
+        };
+        let id = self.attr(child, &pos, "id")?;
+        let name = self.attr(child, &pos, "name")?.unwrap_or_default();
+        if self.nesting >= MAX_NESTING {
+            return Err(pos
+                .err(format!("objects nested more than {MAX_NESTING} deep; no scene needs that")));
+        }
+        self.nesting += 1;
+        let inner = self.children(child, at, false);
+        self.nesting -= 1;
+        let object = Rc::new(Object {
+            tag: t.to_string(),
+            kind,
+            id: id.clone(),
+            pos: pos.clone(),
+            props: inner?,
+        });
+        if let Some(id) = id {
+            if let Some(first) = self.ids.get(&id) {
+                return Err(pos.err(format!(
+                    "id \"{id}\" is already used by {} at line {}; ids must be unique",
+                    first.describe(),
+                    first.pos.line
+                )));
+            }
+            self.ids.insert(id, object.clone());
+        }
+        Ok(Prop { name, value: Value::Object(object), pos })
     }
 
     fn include(&mut self, node: Node<'_, '_>, pos: &Pos, top: bool) -> Result<Vec<Prop>> {
