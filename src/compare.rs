@@ -201,6 +201,23 @@ pub struct Run {
     pub error: ImageError,
     /// Error with the comparison's `trim` of worst pixels left out.
     pub trimmed: ImageError,
+    /// Training: passes, spp, seconds and why it stopped (guided methods).
+    pub training: Option<RunTraining>,
+    /// What adaptive guiding chose (`auto` methods).
+    pub selection: Option<crate::render::Selection>,
+}
+
+/// A run's training, as `--stats` reports it.
+#[derive(Clone, Copy, Debug, Serialize)]
+pub struct RunTraining {
+    /// Training passes.
+    pub passes: u32,
+    /// Samples per pixel over them.
+    pub spp: u32,
+    /// Their seconds.
+    pub seconds: f64,
+    /// Why training stopped.
+    pub stop: crate::render::TrainingStop,
 }
 
 /// The median of some runs' values and their range.
@@ -341,12 +358,20 @@ pub fn run(
                 checkpoints.push(Checkpoint { fraction: 1.0, seconds, spp: r.spp, error });
                 image = r.image.clone();
             }
+            let training = r.training.as_ref().map(|t| RunTraining {
+                passes: t.passes,
+                spp: t.spp,
+                seconds: t.seconds,
+                stop: t.stop,
+            });
             runs.push(Run {
                 seed,
                 seconds,
                 spp: r.spp,
                 error,
                 trimmed: measure(&r.image, protocol.trim)?,
+                training,
+                selection: r.selection.clone(),
             });
         }
         let excess = runs
