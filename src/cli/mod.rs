@@ -750,6 +750,11 @@ fn tell(
                 result.training.as_ref().map_or(0, |t| t.passes),
                 sel.gain
             );
+        } else if sel.decided_early {
+            eprintln!(
+                "{name}: adaptive guiding guided every tile with {} (decided after 2 training passes: modelled gain {:.2})",
+                sel.components, sel.gain
+            );
         } else {
             eprintln!(
                 "{name}: adaptive guiding guided {} of {} tiles with {} (modelled gain {:.2})",

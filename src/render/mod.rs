@@ -136,6 +136,7 @@ pub fn render(
             }
         }
         training.run(scene, options, progress, u32::MAX)?;
+        let early = training.early.take().map(Box::new);
         // Moved out, not borrowed: the render phase takes the training films by value.
         let (field, direct, films, report) = training.finish();
         let guidance = Guidance {
@@ -145,7 +146,18 @@ pub fn render(
             guided_tiles: None,
         };
         let options = &after_training(options, &report);
-        Ok(guided_phase(scene, options, guidance, films, threads, progress, Some(report)))
+        if let Some(early) = early.as_deref().filter(|e| decisive(e)) {
+            let early = early.clone();
+            return Ok(guided_everywhere(
+                scene, options, guidance, films, threads, progress, report, early,
+            ));
+        }
+        let mut result =
+            guided_phase(scene, options, guidance, films, threads, progress, Some(report));
+        if let Some(selection) = result.selection.as_mut() {
+            selection.early = early;
+        }
+        Ok(result)
     })
 }
 
@@ -154,17 +166,49 @@ pub fn render(
 /// pilot of at least 2 spp per candidate, are whole samples), so the render is unguided.
 pub const MIN_ADAPTIVE_SPP: u32 = 16;
 
+/// The early look's modelled gain, guiding every tile, from which adaptive guiding skips its
+/// pilot after training and guides every tile with the early look's candidate: the field only
+/// improves with training, and where a field of 3 spp already halves the work of an image, the
+/// pilot (a tenth of the budget or more) could only confirm it. Twice, as much as a partial
+/// choice must gain over guiding everywhere (`select::PARTIAL_MARGIN`).
+const DECISIVE_GAIN: f64 = 2.0;
+
+/// Whether the early look settles adaptive guiding's choice (see [`DECISIVE_GAIN`]).
+fn decisive(early: &Selection) -> bool {
+    early.guided_tiles == early.tiles && early.everywhere_gain >= DECISIVE_GAIN
+}
+
+/// The render phase guiding every tile with the early look's candidate, without a pilot.
+#[allow(clippy::too_many_arguments)]
+fn guided_everywhere(
+    scene: &Scene,
+    options: &RenderOptions,
+    guidance: Guidance<'_>,
+    films: Vec<Film>,
+    threads: usize,
+    progress: &Monitor<'_>,
+    report: TrainingReport,
+    early: Selection,
+) -> RenderResult {
+    let mut options = options.clone();
+    if let Some(components) = crate::guided::Components::parse(&early.components) {
+        options.guiding.components = components;
+    }
+    let mut result =
+        final_phase(scene, &options, Some(guidance), films, threads, progress, Some(report));
+    result.selection = Some(Selection { decided_early: true, seconds: 0.0, ..early });
+    result
+}
+
 /// Training passes after which adaptive guiding first pilots the field (1 + 2 spp).
 const EARLY_PILOT_PASSES: u32 = 2;
 
-/// Least modelled gain of the early pilot's choice for training to go on. The field after
-/// two passes is poorer than after training, so the early gain understates the final one
-/// (`--stats`, image-wide efficiency of guiding every tile after 2 and 5 passes: light shaft
-/// 1.03 and 1.46, occluded light 1.8 and 4.5), and it is noisy (the light shaft's early
-/// choice gained 1.08 with seed 0); where guiding cannot pay (the easy haze, the chromatic
-/// slab) the early pilot chose no tile at all (gain exactly 1) with every seed tried. So only
-/// a choice of next to nothing stops training.
-const EARLY_MIN_GAIN: f64 = 1.02;
+/// Least modelled gain of the early pilot's choice for training to go on. A 2-spp pilot's
+/// best choice of tiles gains a few percent by noise alone (it picks the tiles whose samples
+/// happened to look better), and where guiding pays, a field of 3 spp already gains far more
+/// than a tenth (see docs/experiments.md); below it, the rest of training's share renders
+/// unguided.
+const EARLY_MIN_GAIN: f64 = 1.1;
 
 /// Adaptive guiding's early look: after a short training, a pilot judges whether guiding
 /// can pay anywhere; if not, training stops and the rest of its budget (and the render's)
@@ -185,6 +229,7 @@ fn early_pilot(
     let selection = select::pilot(scene, options, &guidance, last_pass, 2, progress)?.selection;
     if selection.gain >= EARLY_MIN_GAIN {
         training.seconds += selection.seconds;
+        training.early = Some(selection);
         return None;
     }
     training.stop = TrainingStop::NoGain;

@@ -63,7 +63,7 @@ pub struct GuidingOptions {
     /// stays unbiased whatever they are.
     pub combine_training: bool,
     /// Guide only the 16x16 tiles where a pilot after training finds guiding more efficient
-    /// than unguided sampling (see [`Selection`]); the others render unguided.
+    /// than unguided sampling (see [`Selection`](super::Selection)); the others render unguided.
     pub adaptive: bool,
 }
 
@@ -123,7 +123,7 @@ pub struct RenderOptions {
     /// Guiding.
     pub guiding: GuidingOptions,
     /// Find the samples that hold the largest share of the image's error and trace their
-    /// paths ([`FireflyReport`]): this many of them (0: none).
+    /// paths ([`FireflyReport`](super::FireflyReport)): this many of them (0: none).
     pub fireflies: usize,
 }
 
@@ -139,7 +139,7 @@ impl RenderOptions {
         Self { budget, seed, threads: None, guiding: GuidingOptions::default(), fireflies: 0 }
     }
 
-    /// Checks every setting; [`render`], [`render_with_field`] and [`train`] call it before
+    /// Checks every setting; [`render`](super::render), [`render_with_field`](super::render_with_field) and [`train`](super::train) call it before
     /// any work, so options assembled in code meet the same rules as the CLI's.
     pub fn validate(&self) -> Result<(), OptionsError> {
         match self.budget {

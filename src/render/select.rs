@@ -71,6 +71,12 @@ pub struct Selection {
     /// Whether this pilot ran early in training and found too little `gain` to go on: the
     /// rest of the training budget was rendered unguided.
     pub stopped_training: bool,
+    /// The early pilot's selection, when adaptive guiding looked early and went on training.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub early: Option<Box<Selection>>,
+    /// Whether this is the early look's choice, decisive enough that no pilot followed
+    /// training (every tile guided).
+    pub decided_early: bool,
 }
 
 /// The modelled cost of the work `c` counts, in nanoseconds of one thread.
@@ -248,6 +254,8 @@ fn summarise(
         gain: gain(measured, choice),
         everywhere_gain: f64::NAN,
         stopped_training: false,
+        early: None,
+        decided_early: false,
     }
 }
 

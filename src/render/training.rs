@@ -134,6 +134,8 @@ pub(super) struct Training {
     pub(super) stop: TrainingStop,
     /// Samples per pixel of the next pass.
     pub(super) next: u32,
+    /// Adaptive guiding's early look, when it let training go on.
+    pub(super) early: Option<super::Selection>,
 }
 
 impl Training {
@@ -148,6 +150,7 @@ impl Training {
             done: false,
             stop: TrainingStop::Budget,
             next: 1,
+            early: None,
         })
     }
 
