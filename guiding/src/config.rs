@@ -1,7 +1,7 @@
 //! The settings of a guiding field, with defaults and validation.
 
 use crate::GuidingError;
-use crate::mixture::MAX_LOBES;
+use crate::directional::mixture::MAX_LOBES;
 use serde::{Deserialize, Serialize};
 
 /// Which training samples a field learns from, by `Sample::volume`.

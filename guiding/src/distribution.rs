@@ -6,11 +6,11 @@
 //! without touching the allocator. `sample` and `pdf` describe the same normalised mixture,
 //! so `pdf(sample(u))` equals the pdf returned by `sample_with_pdf(u)` to float rounding.
 
+use crate::directional::hg::{self, HG_LOBES};
+use crate::directional::lanes::{self, LANES};
+use crate::directional::mixture::MAX_LOBES;
+use crate::directional::product::{COSINE_KAPPA, LobeSet, RegionLanes};
 use crate::field::Field;
-use crate::hg::{self, HG_LOBES};
-use crate::lanes::{self, LANES};
-use crate::mixture::MAX_LOBES;
-use crate::product::{COSINE_KAPPA, LobeSet, RegionLanes};
 use glam::{Vec2, Vec3};
 
 /// Lobes a product can have: every mixture lobe times every lobe of the phase-function fit.
@@ -163,13 +163,12 @@ impl VolumeDistribution {
     /// multiplied by the lobe's mean clamped cosine `E[max(0, dot(normal, w))]` about
     /// `normal`, the lobes' shapes kept: the cosine counterpart of
     /// [`apply_hg_weights`](Self::apply_hg_weights), at four fifths of the cost of
-    /// [`apply_cosine_product`](Self::apply_cosine_product) (criterion, with loading the
-    /// region: 207 against 265 ns) and a mixture of the region's size to sample and evaluate
-    /// rather than a product mixture. The mean is taken as
-    /// `A max(0, cos) + (1 - A) / 4` for a lobe of mean cosine `A` about a mean at angle
-    /// `cos` to the normal: exact for a uniform lobe (1/4) and in the limit of a sharp one,
-    /// so lobes below the surface keep only what their spread reaches above it. Left without
-    /// a product where no lobe keeps any weight.
+    /// [`apply_cosine_product`](Self::apply_cosine_product) (see docs/experiments.md) and a
+    /// mixture of the region's size to sample and evaluate rather than a product mixture. The
+    /// mean is taken as `A max(0, cos) + (1 - A) / 4` for a lobe of mean cosine `A` about a
+    /// mean at angle `cos` to the normal: exact for a uniform lobe (1/4) and in the limit of a
+    /// sharp one, so lobes below the surface keep only what their spread reaches above it.
+    /// Left without a product where no lobe keeps any weight.
     pub fn apply_cosine_weights(&mut self, normal: Vec3) {
         let mean_cosine = &self.base_mean_cosine;
         let ok = self.product.set_reweighted(&self.base, |mean, _, k| {
@@ -253,10 +252,10 @@ impl VolumeDistribution {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::hg::tests::{GS, HG_FIT_L1_BOUND, zonal_integral};
-    use crate::mixture::Mixture;
+    use crate::directional::hg::tests::{GS, HG_FIT_L1_BOUND, zonal_integral};
+    use crate::directional::mixture::Mixture;
+    use crate::directional::vmf::VmfLobe;
     use crate::testutil::MultiGrid;
-    use crate::vmf::VmfLobe;
     use glam::DVec3;
     use rand_pcg::Pcg32;
     use rand_pcg::rand_core::Rng;
@@ -267,7 +266,7 @@ mod tests {
 
     fn with_mixture(m: &Mixture, fluence: f32) -> VolumeDistribution {
         let mut d = VolumeDistribution::default();
-        d.load_lanes(&RegionLanes::new(m, &[0.0; crate::mixture::MAX_LOBES]));
+        d.load_lanes(&RegionLanes::new(m, &[0.0; crate::directional::mixture::MAX_LOBES]));
         d.fluence = fluence;
         d
     }

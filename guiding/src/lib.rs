@@ -34,31 +34,23 @@
 //! `cos theta = dot(ray_dir, new_dir)`, `ray_dir` being the direction the path travelled.
 
 mod config;
+mod data;
+mod directional;
 mod distribution;
-mod em;
 mod error;
 mod field;
-pub mod hg;
-mod io;
-mod lanes;
-mod mixture;
-pub mod product;
-mod recorder;
-mod sample;
-mod splitmerge;
-mod stats;
+mod spatial;
 #[cfg(test)]
 mod testutil;
-mod tree;
-pub mod vmf;
 
 pub use config::{FieldConfig, SampleKind};
+pub use data::recorder::PathRecorder;
+pub use data::sample::Sample;
+pub use directional::mixture::{MAX_LOBES, Mixture};
+pub use directional::vmf::VmfLobe;
+pub use directional::{hg, product, vmf};
 pub use distribution::{MAX_PRODUCT_LOBES, ProductKind, VolumeDistribution};
 pub use error::GuidingError;
+pub use field::io::{FORMAT_VERSION, MAGIC};
+pub use field::stats::FieldStats;
 pub use field::{Field, Region};
-pub use io::{FORMAT_VERSION, MAGIC};
-pub use mixture::{MAX_LOBES, Mixture};
-pub use recorder::PathRecorder;
-pub use sample::Sample;
-pub use stats::FieldStats;
-pub use vmf::VmfLobe;

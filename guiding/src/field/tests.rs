@@ -2,7 +2,7 @@
 
 use super::*;
 use crate::VolumeDistribution;
-use crate::vmf;
+use crate::directional::vmf;
 use glam::Vec2;
 use rand_pcg::Pcg32;
 use rand_pcg::rand_core::Rng;

@@ -19,7 +19,7 @@
 //! Fits are tabulated over `|g|` once, on first use, and interpolated; negative `g` mirrors the
 //! axis. `|g|` is clamped to [`G_MAX`], as pbrt does, since HG degenerates to a delta at 1.
 
-use crate::vmf;
+use crate::directional::vmf;
 use glam::{Vec2, Vec3};
 use std::f64::consts::PI;
 use std::sync::OnceLock;

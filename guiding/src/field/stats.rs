@@ -1,9 +1,8 @@
 //! Counts, memory and timing of a field, for logs and benchmarks.
 
-use crate::field::{Field, Region};
 use serde::{Deserialize, Serialize};
 
-/// A summary of a [`Field`].
+/// A summary of a [`Field`](crate::Field), from `Field::stats`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct FieldStats {
     /// Leaves of the spatial tree.
@@ -26,25 +25,4 @@ pub struct FieldStats {
     pub total_samples: u64,
     /// Completed updates.
     pub iterations: u32,
-}
-
-impl FieldStats {
-    pub(crate) fn of(field: &Field) -> Self {
-        let regions = field.regions();
-        let counts = regions.iter().map(|r| r.mixture().len());
-        Self {
-            regions: regions.len(),
-            trained_regions: regions.iter().filter(|r| r.is_trained()).count(),
-            lobes: counts.clone().sum(),
-            lobes_min_max: (counts.clone().min().unwrap_or(0), counts.max().unwrap_or(0)),
-            tree_nodes: field.tree.node_count(),
-            tree_depth: field.tree.depth(),
-            memory_bytes: std::mem::size_of::<Field>()
-                + field.regions.capacity() * std::mem::size_of::<Region>()
-                + field.tree.memory_bytes(),
-            last_update_seconds: field.last_update_seconds,
-            total_samples: field.total_samples,
-            iterations: field.iterations,
-        }
-    }
 }

@@ -10,18 +10,21 @@
 //! towards where its samples' light came from, and lookups re-aim the lobes at those sources
 //! from the query point.
 
+pub(crate) mod io;
+mod splitmerge;
+pub(crate) mod stats;
+
 use crate::GuidingError;
 use crate::config::{FieldConfig, MAX_NEIGHBOURS, SampleKind};
-use crate::em::{self, EmSettings, EmStats, WeightedDir};
-use crate::mixture::{MAX_LOBES, Mixture};
-use crate::product::RegionLanes;
-use crate::sample::{Sample, validate_all};
-use crate::splitmerge;
-use crate::stats::FieldStats;
-use crate::tree::{KdTree, SpatialStats};
+use crate::data::sample::{Sample, validate_all};
+use crate::directional::em::{self, EmSettings, EmStats, WeightedDir};
+use crate::directional::mixture::{MAX_LOBES, Mixture};
+use crate::directional::product::RegionLanes;
+use crate::spatial::{KdTree, SpatialStats};
 use glam::Vec3;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
+use stats::FieldStats;
 use std::time::Instant;
 
 /// A leaf of the spatial tree: the incident radiance `L(x, w) = Phi(x) V_L(w)` there.
@@ -306,7 +309,15 @@ impl Field {
                 .collect();
             em::update(&mut region.mixture, &mut region.em, &dirs, &settings);
             if config.split_merge {
-                splitmerge::update(region, &dirs, config);
+                splitmerge::update(
+                    &mut splitmerge::Lobes {
+                        mixture: &mut region.mixture,
+                        em: &mut region.em,
+                        stats: &mut region.split_merge,
+                    },
+                    &dirs,
+                    config,
+                );
             }
             // Without parallax every sample's inverse distance is 0, and so is every lobe's.
             region.lanes = RegionLanes::new(&region.mixture, &region.em.lobe_inverse_distances());
@@ -416,7 +427,22 @@ impl Field {
 
     /// Counts and timings of the field.
     pub fn stats(&self) -> FieldStats {
-        FieldStats::of(self)
+        let regions = &self.regions;
+        let counts = regions.iter().map(|r| r.mixture().len());
+        FieldStats {
+            regions: regions.len(),
+            trained_regions: regions.iter().filter(|r| r.is_trained()).count(),
+            lobes: counts.clone().sum(),
+            lobes_min_max: (counts.clone().min().unwrap_or(0), counts.max().unwrap_or(0)),
+            tree_nodes: self.tree.node_count(),
+            tree_depth: self.tree.depth(),
+            memory_bytes: std::mem::size_of::<Field>()
+                + regions.capacity() * std::mem::size_of::<Region>()
+                + self.tree.memory_bytes(),
+            last_update_seconds: self.last_update_seconds,
+            total_samples: self.total_samples,
+            iterations: self.iterations,
+        }
     }
 }
 
@@ -442,6 +468,3 @@ fn reproject(s: &Sample, pivot: Vec3, near: f32) -> (Vec3, f32) {
     }
     (to / len, 1.0 / len)
 }
-
-#[cfg(test)]
-mod tests;

@@ -13,10 +13,10 @@
 //! split and merged with the lobes, so the next EM update continues from them.
 
 use crate::config::FieldConfig;
-use crate::em::WeightedDir;
-use crate::field::Region;
-use crate::mixture::{MAX_LOBES, Mixture};
-use crate::vmf::{self, VmfLobe};
+use crate::directional::em::EmStats;
+use crate::directional::em::WeightedDir;
+use crate::directional::mixture::{MAX_LOBES, Mixture};
+use crate::directional::vmf::{self, VmfLobe};
 use glam::{DMat3, DVec3};
 use serde::{Deserialize, Serialize};
 
@@ -63,8 +63,16 @@ impl LobeStats {
     }
 }
 
+/// What splitting and merging change in a region: its mixture, the EM statistics the next
+/// update continues from, and the statistics gathered for these decisions.
+pub(super) struct Lobes<'a> {
+    pub(super) mixture: &'a mut Mixture,
+    pub(super) em: &'a mut EmStats,
+    pub(super) stats: &'a mut LobeStats,
+}
+
 /// Gathers the batch's statistics and, once enough samples were seen, splits and merges.
-pub(crate) fn update(region: &mut Region, samples: &[WeightedDir], config: &FieldConfig) {
+pub(super) fn update(region: &mut Lobes<'_>, samples: &[WeightedDir], config: &FieldConfig) {
     let fluence = {
         let n = samples.len() as f64;
         samples.iter().map(|s| s.weight).sum::<f64>() / n
@@ -74,7 +82,7 @@ pub(crate) fn update(region: &mut Region, samples: &[WeightedDir], config: &Fiel
     }
     let mixture = region.mixture.clone();
     let lobes = mixture.lobes();
-    let stats = &mut region.split_merge;
+    let stats = &mut *region.stats;
     for s in samples {
         stats.count += 1.0;
         let q = f64::from(mixture.pdf(s.dir));
@@ -103,18 +111,18 @@ pub(crate) fn update(region: &mut Region, samples: &[WeightedDir], config: &Fiel
     }
     split(region, config);
     merge(region, config);
-    region.split_merge = LobeStats::default();
+    *region.stats = LobeStats::default();
 }
 
-fn split(region: &mut Region, config: &FieldConfig) {
+fn split(region: &mut Lobes<'_>, config: &FieldConfig) {
     loop {
         let lobes = region.mixture.lobes();
         if lobes.len() >= config.max_lobes {
             return;
         }
-        let n = region.split_merge.count;
+        let n = region.stats.count;
         let Some((k, chi2)) = (0..lobes.len())
-            .map(|k| (k, region.split_merge.chi2[k] / n))
+            .map(|k| (k, region.stats.chi2[k] / n))
             .max_by(|a, b| a.1.total_cmp(&b.1))
         else {
             return;
@@ -126,7 +134,7 @@ fn split(region: &mut Region, config: &FieldConfig) {
         let mu = lobe.mean.as_dvec3();
         // Spread of the lobe's samples in its tangent plane.
         let proj = DMat3::IDENTITY - DMat3::from_cols(mu * mu.x, mu * mu.y, mu * mu.z);
-        let cov = proj * region.split_merge.covariance(k) * proj;
+        let cov = proj * region.stats.covariance(k) * proj;
         let (axis, variance) = principal_axis(cov);
         let offset = variance.sqrt().clamp(1e-4, 0.5);
         let (a, b) = ((mu + axis * offset).normalize(), (mu - axis * offset).normalize());
@@ -139,17 +147,17 @@ fn split(region: &mut Region, config: &FieldConfig) {
         new_lobes[k] = VmfLobe { mean: a.as_vec3(), kappa, weight: lobe.weight * 0.5 };
         new_lobes.push(VmfLobe { mean: b.as_vec3(), kappa, weight: lobe.weight * 0.5 });
         region.em.split_lobe(k, new_lobes.len() - 1, a, b);
-        let sm = &mut region.split_merge;
+        let sm = &mut *region.stats;
         sm.chi2[k] *= 0.25; // each half is expected to fit better; stop re-splitting it now
         sm.chi2[new_lobes.len() - 1] = sm.chi2[k];
         sm.weight[k] *= 0.5;
         sm.weight[new_lobes.len() - 1] = sm.weight[k];
         sm.second[new_lobes.len() - 1] = sm.second[k];
-        region.mixture = Mixture::from_valid(&new_lobes);
+        *region.mixture = Mixture::from_valid(&new_lobes);
     }
 }
 
-fn merge(region: &mut Region, config: &FieldConfig) {
+fn merge(region: &mut Lobes<'_>, config: &FieldConfig) {
     loop {
         let lobes = region.mixture.lobes();
         if lobes.len() <= 1 {
@@ -182,7 +190,7 @@ fn merge(region: &mut Region, config: &FieldConfig) {
         let last = new_lobes.len() - 1;
         new_lobes.swap_remove(j);
         region.em.merge_lobes(i, j, last);
-        let sm = &mut region.split_merge;
+        let sm = &mut *region.stats;
         sm.chi2[i] += sm.chi2[j];
         sm.weight[i] += sm.weight[j];
         for c in 0..6 {
@@ -194,15 +202,15 @@ fn merge(region: &mut Region, config: &FieldConfig) {
         sm.chi2[last] = 0.0;
         sm.weight[last] = 0.0;
         sm.second[last] = [0.0; 6];
-        region.mixture = Mixture::from_valid(&new_lobes);
+        *region.mixture = Mixture::from_valid(&new_lobes);
     }
 }
 
 /// Normalised overlap of two lobes, in (0, 1], 1 for identical lobes.
 fn overlap(a: &VmfLobe, b: &VmfLobe) -> f64 {
     let self_product =
-        |l: &VmfLobe| crate::product::vmf_product(l.mean, l.kappa, l.mean, l.kappa).2;
-    let cross = crate::product::vmf_product(a.mean, a.kappa, b.mean, b.kappa).2;
+        |l: &VmfLobe| crate::directional::product::vmf_product(l.mean, l.kappa, l.mean, l.kappa).2;
+    let cross = crate::directional::product::vmf_product(a.mean, a.kappa, b.mean, b.kappa).2;
     (cross - 0.5 * (self_product(a) + self_product(b))).exp()
 }
 
@@ -233,9 +241,9 @@ fn principal_axis(m: DMat3) -> (DVec3, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::em;
+    use crate::data::sample::Sample;
+    use crate::directional::em;
     use crate::field::Field;
-    use crate::sample::Sample;
     use glam::Vec3;
     use rand_pcg::Pcg32;
 

@@ -16,9 +16,9 @@
 // Lane loops index several arrays in step, the form the vectoriser turns into vector code.
 #![allow(clippy::needless_range_loop)]
 
-use crate::lanes::{self, LANES};
-use crate::mixture::{MAX_LOBES, ONE_BELOW, pick};
-use crate::vmf;
+use crate::directional::lanes::{self, LANES};
+use crate::directional::mixture::{MAX_LOBES, ONE_BELOW, pick};
+use crate::directional::vmf;
 use glam::{DVec3, Vec2, Vec3};
 use std::f32::consts::PI;
 

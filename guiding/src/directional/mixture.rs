@@ -5,8 +5,8 @@
 //! heap allocation; each lobe's normalisation is cached because evaluating it needs `expm1`.
 
 use crate::GuidingError;
-use crate::lanes::{self, LANES};
-use crate::vmf::{self, VmfLobe};
+use crate::directional::lanes::{self, LANES};
+use crate::directional::vmf::{self, VmfLobe};
 use glam::{Vec2, Vec3};
 use serde::{Deserialize, Serialize};
 

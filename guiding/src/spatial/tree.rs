@@ -3,25 +3,13 @@
 //! The root covers all of space, so every position has a leaf. A leaf splits once it has seen
 //! enough samples, on the axis where its samples spread most, at their mean: dense parts of the
 //! scene get small regions, sparse parts keep large ones. Nodes live in one vector, children
-//! side by side, and a uniform grid of start nodes ([`start_grid`]) lets most lookups skip
+//! side by side, and a uniform grid of start nodes (`start_grid`) lets most lookups skip
 //! the descent.
 
-mod start_grid;
-
+use super::node::{LEAF, Node};
+use super::start_grid::StartGrid;
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
-use start_grid::StartGrid;
-
-const LEAF: u8 = 3;
-
-/// One node: an inner node splits on `axis` at `split` and has children `child`, `child + 1`;
-/// a leaf (`axis == LEAF`) points at the region `child`.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-pub(crate) struct Node {
-    split: f32,
-    axis: u8,
-    child: u32,
-}
 
 /// The tree of regions.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]

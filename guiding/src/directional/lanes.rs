@@ -147,14 +147,14 @@ mod tests {
         let mut k = 0.0f32;
         while k < 1e6 {
             let (got, want) =
-                (f64::from(mean_cosine(k)), crate::vmf::mean_cosine_f64(f64::from(k)));
+                (f64::from(mean_cosine(k)), crate::directional::vmf::mean_cosine_f64(f64::from(k)));
             assert!((got - want).abs() <= 2e-6 * want, "kappa {k}: {got} vs {want}");
             k = if k < 1.0 { k + 1e-3 } else { k * 1.01 };
         }
         for g in [-0.99f32, -0.7, -0.2, 0.0, 0.3, 0.85, 0.99] {
             for i in 0..=200 {
                 let cos = -1.0 + 0.01 * i as f32;
-                let (got, want) = (hg_pdf(cos, g), crate::hg::hg_pdf(cos, g));
+                let (got, want) = (hg_pdf(cos, g), crate::directional::hg::hg_pdf(cos, g));
                 assert!((got - want).abs() <= 1e-5 * want, "g {g} cos {cos}: {got} vs {want}");
             }
         }

@@ -5,10 +5,10 @@
 //! version fails with `GuidingError::Version` rather than with garbage. Change
 //! [`FORMAT_VERSION`] whenever a serialised struct changes.
 
+use super::{Field, Region};
 use crate::GuidingError;
 use crate::config::FieldConfig;
-use crate::field::{Field, Region};
-use crate::tree::KdTree;
+use crate::spatial::KdTree;
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Write};
 

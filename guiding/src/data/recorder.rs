@@ -28,7 +28,7 @@
 //! Samples with a zero pdf (delta directions, terminated paths) are skipped. The recorder
 //! keeps its buffers between paths, so after warm-up it does not allocate.
 
-use crate::sample::Sample;
+use crate::data::sample::Sample;
 use glam::Vec3;
 
 #[derive(Clone, Copy, Debug)]

@@ -5,14 +5,15 @@
 //! deepest node whose part of space contains the whole cell: a leaf, or a node a few levels
 //! above the leaves where split planes cross the cell. A lookup from there finds exactly the
 //! leaf a descent from the root finds, because every node above it sends the whole cell the
-//! same way (light shaft, single thread: renders 1-5% faster, images identical). The grid is
-//! rebuilt whenever the tree changes.
+//! same way: images stay identical and renders get faster (see docs/experiments.md). The grid
+//! is rebuilt whenever the tree changes.
 
-use super::{LEAF, Node};
+use super::node::{LEAF, Node};
 use glam::Vec3;
 
 /// Cells per leaf the grid aims at: fewer leave more cells straddling a split plane (their
-/// lookups descend from there), more cost memory (8 and 32 rendered the light shaft as fast).
+/// lookups descend from there), more cost memory; half or twice as many render as fast (see
+/// docs/experiments.md).
 const CELLS_PER_LEAF: usize = 16;
 /// Most cells, whatever the tree's size (4 MiB of start nodes).
 const MAX_CELLS: usize = 1 << 20;

@@ -17,8 +17,8 @@
 //!
 //! Everything runs in sample order in f64, so a fit depends only on its samples.
 
-use crate::mixture::{MAX_LOBES, Mixture};
-use crate::vmf::{self, VmfLobe};
+use crate::directional::mixture::{MAX_LOBES, Mixture};
+use crate::directional::vmf::{self, VmfLobe};
 use glam::{DVec3, Vec3};
 use serde::{Deserialize, Serialize};
 

@@ -1,0 +1,474 @@
+//! The `zerovar` command on good and bad input: bad input must exit non-zero with an error
+//! naming the file and the place, and never panic.
+
+use zerovar_testkit::files::{repo, temp_dir, write};
+use std::path::Path;
+use std::process::{Command, Output};
+
+fn zerovar(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_zerovar")).args(args).output().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Runs `check` and `render` on `scene` and expects both to fail with every `needle` in the
+/// message.
+fn assert_fails(scene: &Path, needles: &[&str]) {
+    let out = temp_dir().join("bad.exr");
+    for args in [
+        vec!["check", scene.to_str().unwrap()],
+        vec![
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            out.to_str().unwrap(),
+            "--quiet",
+            "--spp",
+            "1",
+        ],
+    ] {
+        let o = zerovar(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?} panicked: {err}");
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: `{n}` missing from: {err}");
+        }
+    }
+}
+
+const GOOD: &str = r#"
+[defaults]
+g = 0.2
+
+[camera]
+origin = [0, 0, 4]
+target = [0, 0, 0]
+fov = 30
+resolution = [8, 6]
+
+[media.cloud]
+type = "grid"
+density = "cloud.vol"
+scale = 2
+phase = { type = "hg", g = "$g" }
+
+[[shapes]]
+type = "cube"
+bsdf = { type = "null" }
+interior = "cloud"
+
+[[lights]]
+type = "directional"
+direction = [0, -1, 0]
+irradiance = 1
+"#;
+
+/// A 2x2x1 `.vol` file, written byte by byte so that it may hold values no `VolGrid` accepts.
+fn vol(values: &[f32]) -> Vec<u8> {
+    let mut b = b"VOL\x03".to_vec();
+    for i in [1i32, 2, 2, 1, 1] {
+        b.extend_from_slice(&i.to_le_bytes());
+    }
+    for v in [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0].iter().chain(values) {
+        b.extend_from_slice(&v.to_le_bytes());
+    }
+    b
+}
+
+#[test]
+fn renders_a_scene_with_outputs_and_stats() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let scene = write("good.toml", GOOD);
+    let dir = temp_dir();
+    let exr = dir.join("good.exr");
+    let stats = dir.join("good.json");
+    let o = zerovar(&[
+        "render",
+        scene.to_str().unwrap(),
+        "-o",
+        exr.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--threads",
+        "2",
+        "-D",
+        "g=0.7",
+        "--stats",
+        stats.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(exr.is_file() && dir.join("good.png").is_file());
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["spp"], 2);
+    assert_eq!(json["invalid_samples"], 0);
+    assert!(json["paths_per_second"].as_f64().unwrap() > 0.0);
+    let o = zerovar(&["check", scene.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && out.contains("delta tracking"), "{out}");
+    // The README's first command works as written.
+    let o = zerovar(&["check", repo("scenes/fog-sphere.toml").to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+#[test]
+fn bad_scenes_fail_clearly() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let cases: Vec<(&str, String, Vec<&str>)> = vec![
+        ("malformed.toml", GOOD.replace("[camera]", "[camera"), vec!["malformed.toml:5:"]),
+        (
+            "unknown.toml",
+            GOOD.replace("fov = 30", "fov = 30\nfocal = 2"),
+            vec!["unknown.toml:9:", "focal"],
+        ),
+        (
+            "missing.toml",
+            GOOD.replace("cloud.vol", "nowhere.vol"),
+            vec!["missing.toml:11:", "media.cloud", "nowhere.vol"],
+        ),
+        (
+            "zerodir.toml",
+            GOOD.replace("[0, -1, 0]", "[0, 0, 0]"),
+            vec!["zerodir.toml:22:", "lights[0]", "zero length"],
+        ),
+        (
+            "negsigma.toml",
+            GOOD.replace("scale = 2", "scale = -2"),
+            vec!["negsigma.toml:11:", "scale -2"],
+        ),
+        (
+            "badg.toml",
+            GOOD.replace("g = 0.2", "g = 1.0"),
+            vec!["badg.toml:11:", "strictly between -1 and 1"],
+        ),
+    ];
+    for (name, text, needles) in cases {
+        assert_fails(&write(name, text), &needles);
+    }
+}
+
+#[test]
+fn bad_volume_files_fail_clearly() {
+    let cases: Vec<(&str, Vec<u8>, &str)> = vec![
+        ("truncated.vol", vol(&[0.5, 1.0, 0.2, 0.0])[..60].to_vec(), "truncated"),
+        ("negative.vol", vol(&[0.5, -1.0, 0.2, 0.0]), "voxel (1, 0, 0)"),
+        ("nan.vol", vol(&[0.5, 1.0, f32::NAN, 0.0]), "voxel (0, 1, 0)"),
+        (
+            "garbage.vol",
+            b"not a volume at all, just some text padding it out to 48 bytes...".to_vec(),
+            "VOL",
+        ),
+    ];
+    for (name, bytes, needle) in cases {
+        write(name, bytes);
+        let scene = write(&format!("{name}.toml"), GOOD.replace("cloud.vol", name));
+        assert_fails(&scene, &[name, needle, "media.cloud"]);
+    }
+}
+
+#[test]
+fn bad_arguments_fail_clearly() {
+    let scene = repo("scenes/fog-sphere.toml");
+    let s = scene.to_str().unwrap();
+    for (args, needle) in [
+        (vec!["render", s, "--spp", "0"], "--spp 0"),
+        (vec!["render", s, "--time", "-1"], "--time"),
+        (vec!["render", s, "-o", "x.png"], ".exr"),
+        (vec!["render", s, "-D", "nosuch=1"], "nosuch"),
+        (vec!["render", s, "-D", "novalue"], "KEY=VALUE"),
+        (vec!["render", "/nonexistent/scene.toml"], "/nonexistent/scene.toml"),
+        (vec!["render", s, "--training-images", "keep"], "combine, discard"),
+    ] {
+        let o = zerovar(&args);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && err.contains(needle) && !err.contains("panicked"),
+            "{args:?}: {err}"
+        );
+    }
+}
+
+#[test]
+fn trains_a_field_and_renders_with_it() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let scene = write("train.toml", GOOD);
+    let dir = temp_dir();
+    let field = dir.join("train.zvg");
+    let s = scene.to_str().unwrap();
+    let o = zerovar(&["train", s, "-o", field.to_str().unwrap(), "--train-passes", "3", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(field.is_file());
+    // The parallax setting is the field's, saved with it.
+    let flat = dir.join("train-flat.zvg");
+    let o = zerovar(&[
+        "train",
+        s,
+        "-o",
+        flat.to_str().unwrap(),
+        "--train-passes",
+        "2",
+        "--parallax",
+        "off",
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let load = |p: &Path| zerovar::TrainedField::load(std::fs::File::open(p).unwrap()).unwrap();
+    assert!(load(&field).field.config().parallax && !load(&flat).field.config().parallax);
+    let exr = dir.join("train.exr");
+    let stats = dir.join("train.json");
+    let (e, f, st) = (exr.to_str().unwrap(), field.to_str().unwrap(), stats.to_str().unwrap());
+    let o = zerovar(&["render", s, "-o", e, "--spp", "2", "--field", f, "--stats", st, "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = zerovar(&[
+        "render",
+        s,
+        "-o",
+        e,
+        "--spp",
+        "2",
+        "--guiding",
+        "full",
+        "--train-passes",
+        "2",
+        "--stats",
+        st,
+        "--quiet",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&stats).unwrap()).unwrap();
+    assert_eq!(json["training"]["passes"], 2);
+    assert!(json["training"]["regions"].as_u64().unwrap() >= 1);
+    // Adaptive guiding says what its training and its pilot did.
+    let o = zerovar(&[
+        "render",
+        s,
+        "-o",
+        e,
+        "--spp",
+        "2",
+        "--guiding",
+        "auto",
+        "--train-passes",
+        "3",
+        "--quiet",
+    ]);
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("trained") && err.contains("adaptive guiding"), "{err}");
+    // A file that is not a field, and bad guiding arguments, fail clearly.
+    let bogus = write("bogus.zvg", b"not a field");
+    let o = zerovar(&["render", s, "-o", e, "--field", bogus.to_str().unwrap(), "--quiet"]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("bogus.zvg") && !stderr(&o).contains("panicked"),
+        "{}",
+        stderr(&o)
+    );
+    for (args, needle) in [
+        (vec!["--guiding", "sideways"], "--guiding sideways"),
+        (vec!["--guiding", "full", "--alpha", "1.5"], "--alpha 1.5"),
+        (vec!["--guiding", "full", "--distance-alpha", "2"], "--distance-alpha 2"),
+        (vec!["--guiding", "full", "--train-passes", "0"], "--train-passes 0"),
+        // A field with nothing to guide would be loaded for nothing.
+        (vec!["--guiding", "off", "--field", f], "--guiding off: rendering with --field"),
+        // A saved field keeps the lobes it was trained with.
+        (vec!["--field", f, "--parallax", "off"], "--parallax: a saved field keeps"),
+        (vec!["--guiding", "full", "--parallax", "sideways"], "invalid value 'sideways'"),
+    ] {
+        let o = zerovar(&[&["render", s, "-o", e, "--quiet"][..], &args].concat());
+        assert!(!o.status.success() && stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
+    }
+}
+
+#[test]
+fn reference_and_compare_end_to_end() {
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let scene = write("cmp.toml", GOOD);
+    let s = scene.to_str().unwrap();
+    let dir = temp_dir().join("cmp");
+    let reference = temp_dir().join("cmp-ref.exr");
+    let r = reference.to_str().unwrap();
+    let o = zerovar(&["reference", s, "-o", r, "--spp", "64", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let d = dir.to_str().unwrap();
+    let o = zerovar(&[
+        "compare",
+        s,
+        "--reference",
+        r,
+        "--spp",
+        "8",
+        "--out",
+        d,
+        "--method",
+        "a=guiding:off",
+        "--method",
+        "b=guiding:off",
+        "--method",
+        "g=guiding:full,alpha:0.5,train-passes:2",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "results.md",
+        "results.csv",
+        "results.json",
+        "a.exr",
+        "a.png",
+        "a-error.png",
+        "g.exr",
+        "strip.png",
+        "crops.png",
+        "convergence.png",
+        "convergence.svg",
+    ] {
+        assert!(dir.join(f).is_file(), "{f} missing");
+    }
+    // The plot names every method in its legend.
+    let svg = std::fs::read_to_string(dir.join("convergence.svg")).unwrap();
+    let texts: Vec<&str> =
+        svg.split("</text>").filter_map(|t| t.rsplit('>').next()).map(str::trim).collect();
+    for name in ["a", "b", "g", "relMSE"] {
+        assert!(texts.contains(&name), "convergence.svg lacks the label {name}: {texts:?}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("results.json")).unwrap()).unwrap();
+    let (a, b) = (&json[0], &json[1]);
+    assert_eq!(a["checkpoints"].as_array().unwrap().len(), 4);
+    // Three seeds by default, from the scene's seed on; the first seed's run is the
+    // convergence curve's last point.
+    let runs = a["runs"].as_array().unwrap();
+    let seeds: Vec<u64> = runs.iter().map(|r| r["seed"].as_u64().unwrap()).collect();
+    assert_eq!(seeds.len(), 3);
+    assert!(seeds.windows(2).all(|w| w[1] == w[0] + 1), "{seeds:?}");
+    assert_eq!(runs[0]["error"], a["checkpoints"][3]["error"]);
+    // The same method twice: the same images, so the same errors; the speed-up is a timing
+    // ratio.
+    for (ra, rb) in runs.iter().zip(b["runs"].as_array().unwrap()) {
+        assert_eq!(ra["error"]["rel_mse"]["all"], rb["error"]["rel_mse"]["all"]);
+        // Leaving pixels out lowers the error.
+        let trimmed = ra["trimmed"]["rel_mse"]["all"].as_f64().unwrap();
+        assert!(trimmed <= ra["error"]["rel_mse"]["all"].as_f64().unwrap());
+    }
+    let speedup = b["speedup"].as_f64().unwrap();
+    assert!(speedup > 0.25 && speedup < 4.0, "self speed-up {speedup}");
+    // The reference carries its standard error: its share is reported and taken out.
+    let mut used = Vec::new();
+    let basis = a["error_basis"].as_str().unwrap();
+    for run in runs {
+        let e = &run["error"];
+        let share = e["reference_noise"]["share"]["all"].as_f64().unwrap();
+        let excess = e["reference_noise"]["excess"]["all"].as_f64().unwrap();
+        let rel_mse = e["rel_mse"]["all"].as_f64().unwrap();
+        assert!(share > 0.0 && (rel_mse - share - excess).abs() <= 1e-12 * rel_mse, "{e}");
+        used.push(if basis == "excess" { excess } else { rel_mse });
+    }
+    // The efficiency's error is the runs' median.
+    used.sort_by(f64::total_cmp);
+    assert_eq!(a["error"].as_f64().unwrap(), used[1], "{basis}");
+    assert!(a["rel_mse"]["min"].as_f64().unwrap() <= a["rel_mse"]["max"].as_f64().unwrap());
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(table.lines().count(), 8, "{table}");
+    assert!(table.lines().take(5).skip(2).all(|l| l.split('|').count() == 12), "{table}");
+    assert!(table.contains("Medians over 3 seeds"), "{table}");
+    assert!(table.contains("The reference's own noise adds"), "{table}");
+    // A reference without a standard-error layer (a render's EXR) keeps the raw relMSE, and
+    // says so.
+    let plain = dir.join("g.exr");
+    let o = zerovar(&[
+        "compare",
+        s,
+        "--reference",
+        plain.to_str().unwrap(),
+        "--spp",
+        "2",
+        "--out",
+        temp_dir().join("cmp-plain").to_str().unwrap(),
+        "--method",
+        "a",
+    ]);
+    assert!(o.status.success() && stderr(&o).contains("has no `stderr` layer"), "{}", stderr(&o));
+    let table = String::from_utf8_lossy(&o.stdout);
+    assert!(!table.contains("reference noise"), "{table}");
+    // Errors: a reference of another size, a missing one, an unknown option.
+    let small = write("cmp-small.toml", GOOD.replace("resolution = [8, 6]", "resolution = [4, 3]"));
+    let o =
+        zerovar(&["compare", small.to_str().unwrap(), "--reference", r, "--spp", "1", "--out", d]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("8x6") && stderr(&o).contains("4x3"),
+        "{}",
+        stderr(&o)
+    );
+    for bad in ["6,0,4,4", "0,0,0,2", "1,2,3", "a,b,c,d"] {
+        let o = zerovar(&["compare", s, "--reference", r, "--spp", "1", "--out", d, "--crop", bad]);
+        assert!(
+            !o.status.success() && stderr(&o).contains(&format!("--crop {bad}")),
+            "{bad}: {}",
+            stderr(&o)
+        );
+    }
+    let o =
+        zerovar(&["compare", s, "--reference", "/nonexistent/ref.exr", "--spp", "1", "--out", d]);
+    assert!(!o.status.success() && stderr(&o).contains("/nonexistent/ref.exr"), "{}", stderr(&o));
+    let o = zerovar(&[
+        "compare",
+        s,
+        "--reference",
+        r,
+        "--spp",
+        "1",
+        "--out",
+        d,
+        "--method",
+        "x=speed:11",
+    ]);
+    assert!(!o.status.success() && stderr(&o).contains("unknown option `speed`"), "{}", stderr(&o));
+    assert!(!stderr(&o).contains("panicked"));
+}
+
+/// A minimal valid Mitsuba scene, edited into bad ones.
+const GOOD_XML: &str = r#"<scene version="3.0.0">
+    <sensor type="perspective">
+        <float name="fov" value="40"/>
+    </sensor>
+    <shape type="sphere">
+        <float name="radius" value="1"/>
+    </shape>
+</scene>
+"#;
+
+#[test]
+fn cli_checks_and_renders_xml_and_fails_cleanly() {
+    let run =
+        |args: &[&str]| Command::new(env!("CARGO_BIN_EXE_zerovar")).args(args).output().unwrap();
+    let scene = repo("scenes/xml/fog-sphere.xml");
+    let o = run(&["check", scene.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("fog          homogeneous"));
+    let out = temp_dir().join("fog-xml.exr");
+    let o = run(&[
+        "render",
+        repo("scenes/xml/cloud.xml").to_str().unwrap(),
+        "--spp",
+        "1",
+        "-D",
+        "density=2",
+        "-o",
+        out.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(o.status.success() && out.is_file(), "{}", String::from_utf8_lossy(&o.stderr));
+
+    let bad = write("bad-cli.xml", GOOD_XML.replace("<float name=\"radius\"", "<float nam=\"radius\""));
+    for cmd in ["check", "render"] {
+        let o = run(&[cmd, bad.to_str().unwrap()]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(1), "{err}");
+        assert!(!err.contains("panicked") && err.contains("bad-cli.xml:6:9"), "{err}");
+        assert!(err.contains("<float> has no attribute `nam`"), "{err}");
+    }
+}
