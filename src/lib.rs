@@ -1,6 +1,7 @@
 //! zerovar: a volumetric path tracer built around zero-variance path guiding.
 //!
-//! The library holds everything the `zerovar` binary does (the binary only parses arguments):
+//! The library holds everything a render needs (the `zerovar` binary, in `lab/`, parses
+//! arguments and runs comparisons):
 //! load a scene from a file ([`scene::load`]) or build one in code ([`SceneBuilder`]), set
 //! [`RenderOptions`] (checked by [`RenderOptions::validate`]), train a guiding field, render
 //! to an in-memory image, read the counters, report progress and cancel through a callback.
@@ -24,29 +25,29 @@
 //! The modules come in two tiers. The **application API**, what a host program needs, is
 //! re-exported here: [`scene`] (load, [`SceneBuilder`], the element descriptions of
 //! [`scene::desc`]), [`render`] (options, training, rendering, cancellation), [`guided`]'s
-//! [`TrainedField`], [`film`] and [`output`] (EXR/PNG), [`stats`], [`metrics`] and [`compare`].
+//! [`TrainedField`], [`film`] and [`output`] (EXR/PNG) and [`stats`]. Comparison runs, error
+//! metrics and plots are the lab's (`zerovar-lab`, which also builds the `zerovar` binary), so
+//! the library does not carry plotting.
 //! The **building blocks** are public for research code that assembles its own integrator
 //! or extends the renderer: [`media`] (with the [`media::DensityFunction`] trait for host
 //! densities), [`tracking`] (free-flight and transmittance estimators), [`phase`], [`bsdf`],
 //! [`lights`], [`camera`], [`shapes`], [`integrators`], [`math`], [`rng`], [`transform`] and
-//! [`plot`]; they follow the same rules but change more freely between versions. The
+//! [`files`]; they follow the same rules but change more freely between versions. The
 //! acceleration structure and sampling tables are private.
 
 mod accel;
 pub mod bsdf;
 pub mod camera;
-pub mod compare;
 mod distribution;
+pub mod files;
 pub mod film;
 pub mod guided;
 pub mod integrators;
 pub mod lights;
 pub mod math;
 pub mod media;
-pub mod metrics;
 pub mod output;
 pub mod phase;
-pub mod plot;
 pub mod render;
 pub mod rng;
 pub mod scene;

@@ -18,6 +18,10 @@ pub const INV_FOUR_PI: f32 = 0.25 * FRAC_1_PI;
 /// size, so the next intersection does not find the same surface again.
 pub const RAY_EPSILON: f32 = 1e-4;
 
+/// The denominator offset of relative errors, `(I - R)^2 / (R^2 + eps)`: the relMSE of image
+/// comparisons, and the weights the renderer derives from estimated relative errors.
+pub const RELATIVE_EPSILON: f64 = 1e-3;
+
 /// A ray `origin + t * direction` with `direction` of unit length.
 #[derive(Clone, Copy, Debug)]
 pub struct Ray {

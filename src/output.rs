@@ -27,6 +27,14 @@ pub enum OutputError {
         /// The reason.
         message: String,
     },
+    /// An EXR file that cannot be read, or holds more pixels than [`MAX_EXR_PIXELS`].
+    #[error("{path}: cannot read EXR: {message}")]
+    Read {
+        /// The file.
+        path: String,
+        /// The reason.
+        message: String,
+    },
     /// PNG encoding or file error.
     #[error("{path}: cannot write PNG: {message}")]
     Png {
@@ -37,9 +45,31 @@ pub enum OutputError {
     },
 }
 
+/// The most pixels an EXR layer may hold for zerovar to read it (16384 x 8192, 1.5 GiB of RGB):
+/// the header's size is checked before any pixel is allocated, so a corrupt header cannot
+/// exhaust memory, and it is far above any environment map or reference a render needs.
+pub const MAX_EXR_PIXELS: usize = 1 << 27;
+
+/// Refuses a file whose header claims more than [`MAX_EXR_PIXELS`] pixels in a layer.
+fn check_exr_size(path: &Path) -> Result<(), OutputError> {
+    let fail = |message: String| OutputError::Read { path: path.display().to_string(), message };
+    crate::files::check(path).map_err(|e| fail(e.to_string()))?;
+    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| fail(e.to_string()))?;
+    for header in &meta.headers {
+        let (w, h) = (header.layer_size.width(), header.layer_size.height());
+        if w.checked_mul(h).is_none_or(|n| n > MAX_EXR_PIXELS) {
+            return Err(fail(format!(
+                "its header claims {w} x {h} pixels, more than the {MAX_EXR_PIXELS} zerovar reads; the file is corrupt, or give a smaller image"
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// Reads the first RGB(A) layer of an EXR file as row-major pixels: (width, height, pixels).
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), OutputError> {
-    let exr_error = |e: exr::error::Error| OutputError::Exr {
+    check_exr_size(path)?;
+    let exr_error = |e: exr::error::Error| OutputError::Read {
         path: path.display().to_string(),
         message: e.to_string(),
     };
@@ -61,7 +91,8 @@ pub fn read_exr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), OutputErro
 pub fn read_exr_with_error(
     path: &Path,
 ) -> Result<(usize, usize, Vec<[f32; 3]>, Option<Vec<[f32; 3]>>), OutputError> {
-    let fail = |message: String| OutputError::Exr { path: path.display().to_string(), message };
+    check_exr_size(path)?;
+    let fail = |message: String| OutputError::Read { path: path.display().to_string(), message };
     let Ok(image) = exr::prelude::read_all_rgba_layers_from_file(
         path,
         |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
@@ -137,7 +168,10 @@ fn layer_attributes(name: &str, meta: &ImageMetadata) -> exr::meta::header::Laye
     attributes.software_name =
         Some(Text::from(format!("zerovar {}", env!("CARGO_PKG_VERSION")).as_str()));
     let mut text = |k: &str, v: String| {
-        attributes.other.insert(Text::from(k), AttributeValue::Text(Text::from(v.as_str())));
+        // EXR text is Latin-1: other characters (a scene path with an en dash or a CJK
+        // directory) become `?` rather than failing the write.
+        let latin1: String = v.chars().map(|c| if u32::from(c) < 256 { c } else { '?' }).collect();
+        attributes.other.insert(Text::from(k), AttributeValue::Text(Text::from(latin1.as_str())));
     };
     text("zerovar.spp", meta.spp.to_string());
     text("zerovar.seconds", format!("{:.3}", meta.seconds));
@@ -192,6 +226,48 @@ pub fn write_png(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A scene path outside Latin-1 (EXR's text) still writes, its metadata with `?` in place
+    /// of the characters EXR cannot hold.
+    #[test]
+    fn metadata_outside_latin1_writes() {
+        let dir = std::env::temp_dir().join(format!("zerovar-output-text-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let meta =
+            ImageMetadata {
+                spp: 1, seconds: 0.0, seed: 0, scene: "目录/fog–sphere ☃.toml".into()
+            };
+        let path = dir.join("text.exr");
+        write_exr(&path, 2, 1, &[[0.5; 3]; 2], &meta).unwrap();
+        write_exr_with_error(&path, 2, 1, &[[0.5; 3]; 2], &[[0.1; 3]; 2], &meta).unwrap();
+        assert_eq!(read_exr(&path).unwrap().2, vec![[0.5; 3]; 2]);
+    }
+
+    /// A file whose header claims 60000 x 60000 pixels (a few hundred bytes on disk) is refused
+    /// from its header, before any pixel is allocated, by both readers.
+    #[test]
+    fn an_exr_header_claiming_too_many_pixels_is_refused() {
+        let dir = std::env::temp_dir().join(format!("zerovar-output-big-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let small = dir.join("small.exr");
+        let meta = ImageMetadata { spp: 1, seconds: 0.0, seed: 0, scene: "s.toml".into() };
+        write_exr(&small, 2, 2, &[[0.5; 3]; 4], &meta).unwrap();
+        let mut bytes = std::fs::read(&small).unwrap();
+        // The data window: `dataWindow\0box2i\0`, a 4-byte size, then xMin, yMin, xMax, yMax.
+        let key = b"dataWindow\0box2i\0";
+        let at =
+            bytes.windows(key.len()).position(|w| w == key).expect("a data window") + key.len();
+        for (i, v) in [0i32, 0, 59_999, 59_999].into_iter().enumerate() {
+            bytes[at + 4 + 4 * i..at + 8 + 4 * i].copy_from_slice(&v.to_le_bytes());
+        }
+        let big = dir.join("big.exr");
+        std::fs::write(&big, bytes).unwrap();
+        assert!(read_exr(&small).is_ok());
+        for e in [read_exr(&big).unwrap_err(), read_exr_with_error(&big).unwrap_err()] {
+            let e = e.to_string();
+            assert!(e.contains("big.exr: cannot read EXR: its header claims 60000 x 60000"), "{e}");
+        }
+    }
 
     #[test]
     fn the_standard_error_layer_reads_back_only_where_written() {

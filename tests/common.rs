@@ -1,31 +1,17 @@
 //! Helpers shared by the integration tests: scenes from text, per-channel estimates.
 
 use glam::Vec2;
-use std::path::{Path, PathBuf};
 use zerovar::integrators::VolPath;
 use zerovar::rng::Sampler;
 use zerovar::scene::Scene;
 use zerovar::stats::Counters;
 use zerovar_testkit::MeanEstimate;
+pub(crate) use zerovar_testkit::files::{repo, temp_dir, write};
 
 /// A scene from TOML text (relative paths resolve against the test's temporary directory).
 pub(crate) fn scene(text: &str) -> Scene {
     zerovar::scene::load_str(&temp_dir().join("test.toml"), text, &[])
         .unwrap_or_else(|e| panic!("{e}"))
-}
-
-/// A fresh directory for this test process.
-pub(crate) fn temp_dir() -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("zerovar-tests-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-/// Writes `contents` to a file in the temporary directory and returns its path.
-pub(crate) fn write(name: &str, contents: impl AsRef<[u8]>) -> PathBuf {
-    let path = temp_dir().join(name);
-    std::fs::write(&path, contents).unwrap();
-    path
 }
 
 /// Per-channel mean estimates of `n` camera paths through uniformly random film positions
@@ -50,11 +36,6 @@ pub(crate) fn estimate_region(
         }
     }
     est
-}
-
-/// The path of a file in the repository.
-pub(crate) fn repo(path: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(path)
 }
 
 /// The mean luminance of one quadrant of a film, with the variance and third cumulant of that

@@ -1,7 +1,6 @@
 //! Integration tests of the renderer, one binary with a module per concern (as ripgrep does).
 
 mod api;
-mod cli;
 mod common;
 mod furnace;
 mod guided;

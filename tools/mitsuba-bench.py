@@ -21,7 +21,7 @@ backend cannot start or crashes (Dr.Jit needs a shared libLLVM; LLVM 14 and 15 a
 kernels Mitsuba 3.9 emits, so `auto` points DRJIT_LIBLLVM_PATH at the newest libLLVM found, if
 the variable is unset). Which variant ran is printed and recorded.
 
-Metrics are zerovar's (src/metrics.rs), computed the same way: per pixel and channel, relMSE =
+Metrics are zerovar's (lab/src/metrics.rs), computed the same way: per pixel and channel, relMSE =
 (I - R)^2 / (R^2 + 1e-3), MSE = (I - R)^2, MAPE = |I - R| / (|R| + 1e-3), SMAPE = 2 |I - R| /
 (|I| + |R| + 1e-3), each averaged over the pixels and over channels for `all`. `error` counts
 every pixel; `trimmed` is the same with the fraction `--trim` of pixels with the largest value
@@ -116,7 +116,7 @@ def newest_libllvm():
 
 
 # ---------------------------------------------------------------------------------------------
-# Metrics, exactly as src/metrics.rs computes them.
+# Metrics, exactly as lab/src/metrics.rs computes them.
 
 
 def metric(image, reference, trim, f):

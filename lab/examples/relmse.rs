@@ -3,8 +3,8 @@
 //! `cargo run --release --example relmse -- REFERENCE.exr IMAGE.exr...`.
 
 use std::path::Path;
-use zerovar_lab::metrics::compare;
 use zerovar::output::read_exr;
+use zerovar_lab::metrics::compare;
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().skip(1).collect();

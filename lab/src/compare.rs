@@ -11,13 +11,12 @@
 //! relMSE (the reference's own noise taken out, see [`crate::metrics`]) provided every method's
 //! excess stands out of its noise; otherwise from the raw relMSE, and the table says which.
 
-use zerovar::guided::Components;
 use crate::metrics::{ImageError, MetricsError, compare_with_reference_noise};
-use zerovar::render::{Budget, RenderError, RenderOptions, TrainBudget, parse_guiding, render};
+use serde::Serialize;
+use zerovar::guided::Components;
+use zerovar::render::{Budget, RenderError, RenderOptions, TrainBudget, render};
 use zerovar::scene::Scene;
 use zerovar::tracking::TrackerChoice;
-use serde::Serialize;
-use std::time::Duration;
 
 /// A named set of render options.
 #[derive(Clone, Debug)]
@@ -61,14 +60,9 @@ pub enum CompareError {
 }
 
 impl Method {
-    /// Parses `NAME=key:value,key:value,...` over `base`. Keys: `guiding` (off, directions,
-    /// distances, rr, full, auto or a +-list), `alpha`, `surface-alpha`, `distance-alpha`,
-    /// `train-share` (a fraction of the budget), `train-passes`, `train-time` (seconds),
-    /// `tracker` (a `--tracker` name), `combine` (true, the default:
-    /// training images join the result by inverse variance; false discards them, as
-    /// `--training-images`), `parallax` (on, the default, or off: the field's lobes fixed per
-    /// region, as `--parallax off`).
-    /// `NAME` alone means `base` unchanged.
+    /// Parses `NAME=key:value,key:value,...` over `base`. The keys are the guiding settings
+    /// (`zerovar::render::SETTINGS`: the CLI's flags without `--`, with the same values and
+    /// rules) and `tracker` (a `--tracker` name). `NAME` alone means `base` unchanged.
     pub fn parse(spec: &str, base: &RenderOptions) -> Result<Self, CompareError> {
         let err = |why: String| CompareError::Method { spec: spec.to_string(), why };
         let (name, rest) = spec.split_once('=').unwrap_or((spec, ""));
@@ -78,81 +72,21 @@ impl Method {
         }
         let mut m =
             Method { name: name.to_string(), options: base.clone(), tracker: TrackerChoice::Auto };
+        let mut settings = Vec::new();
         for pair in rest.split(',').map(str::trim).filter(|p| !p.is_empty()) {
             let Some((key, value)) = pair.split_once(':') else {
                 return Err(err(format!("`{pair}` is not key:value")));
             };
-            let number = || {
-                value.parse::<f64>().map_err(|_| err(format!("{key}: `{value}` is not a number")))
-            };
-            let probability = || {
-                let a = number()?;
-                if !(0.0..=1.0).contains(&a) {
-                    return Err(err(format!("{key} {a} must lie in [0, 1]")));
-                }
-                Ok(a as f32)
-            };
-            match key {
-                "guiding" => {
-                    let (components, adaptive) = parse_guiding(value)
-                        .ok_or_else(|| err(format!("guiding: unknown mode `{value}`")))?;
-                    m.options.guiding.components = components;
-                    m.options.guiding.adaptive = adaptive;
-                }
-                "alpha" => m.options.guiding.alpha = probability()?,
-                "surface-alpha" => m.options.guiding.surface_alpha = probability()?,
-                "distance-alpha" => m.options.guiding.distance_alpha = probability()?,
-                "train-passes" => {
-                    let n = number()?;
-                    if !(1.0..=20.0).contains(&n) || n.fract() != 0.0 {
-                        return Err(err(format!(
-                            "train-passes {n} must be a whole number from 1 to 20"
-                        )));
-                    }
-                    m.options.guiding.train = TrainBudget::Passes(n as u32);
-                }
-                "train-share" => {
-                    let f = number()?;
-                    if !(f > 0.0 && f < 1.0) {
-                        return Err(err(format!(
-                            "train-share {f} must be a fraction of the budget above 0 and below 1"
-                        )));
-                    }
-                    m.options.guiding.train = TrainBudget::Share(f as f32);
-                }
-                "train-time" => {
-                    let t = number()?;
-                    if !(t > 0.0 && t < 1e7) {
-                        return Err(err(format!(
-                            "train-time {t} must be a positive number of seconds"
-                        )));
-                    }
-                    m.options.guiding.train = TrainBudget::Time(Duration::from_secs_f64(t));
-                }
-                "tracker" => {
-                    m.tracker = value.parse().map_err(|e| err(format!("tracker: {e}")))?;
-                }
-                "combine" => {
-                    m.options.guiding.combine_training = match value {
-                        "true" | "yes" | "1" => true,
-                        "false" | "no" | "0" => false,
-                        _ => return Err(err(format!("combine: `{value}` is not true or false"))),
-                    };
-                }
-                "parallax" => {
-                    m.options.guiding.field.parallax = match value {
-                        "on" | "true" | "yes" | "1" => true,
-                        "off" | "false" | "no" | "0" => false,
-                        _ => return Err(err(format!("parallax: `{value}` is not on or off"))),
-                    };
-                }
-                _ => {
-                    return Err(err(format!(
-                        "unknown option `{key}`; use guiding, alpha, surface-alpha, distance-alpha, train-share, train-passes, train-time, tracker, combine or parallax"
-                    )));
-                }
+            if key.trim() == "tracker" {
+                m.tracker = value.parse().map_err(|e| err(format!("tracker: {e}")))?;
+            } else {
+                settings.push((key.trim(), value));
             }
         }
+        m.options.guiding.apply(settings).map_err(|e| {
+            let known = matches!(e, zerovar::render::SettingError::Unknown { .. });
+            err(if known { format!("{e}, or tracker") } else { e.to_string() })
+        })?;
         Ok(m)
     }
 
@@ -314,7 +248,7 @@ pub fn run(
     };
     // Size and trim are checked before any rendering.
     measure(reference, protocol.trim)?;
-    let pixels = (scene.camera.resolution()[0] * scene.camera.resolution()[1]) as usize;
+    let pixels = (scene.camera().resolution()[0] * scene.camera().resolution()[1]) as usize;
     if pixels != reference.len() {
         return Err(MetricsError::SizeMismatch { image: pixels, reference: reference.len() }.into());
     }
@@ -561,12 +495,12 @@ mod tests {
     fn method_options_parse_and_bad_ones_are_named() {
         let base = RenderOptions::unguided(Budget::Samples(4), 1);
         let m = Method::parse(
-            "g=guiding:full,alpha:0.7,surface-alpha:0.9,distance-alpha:0.25,train-passes:3,combine:false",
+            "g=guiding:full,alpha:0.7,surface-alpha:0.8,distance-alpha:0.25,train-passes:3,training-images:discard",
             &base,
         )
         .expect("valid method");
         assert_eq!(m.options.guiding.distance_alpha, 0.25);
-        assert_eq!(m.options.guiding.surface_alpha, 0.9);
+        assert_eq!(m.options.guiding.surface_alpha, 0.8);
         assert!(m.options.guiding.field.parallax);
         let flat = Method::parse("f=guiding:full,parallax:off", &base).expect("valid method");
         assert!(!flat.options.guiding.field.parallax);
@@ -578,12 +512,15 @@ mod tests {
         // Training images are combined unless a method says otherwise.
         assert!(plain.options.guiding.combine_training && !plain.options.guiding.components.any());
         for (spec, says) in [
-            ("g=combine:maybe", "combine: `maybe` is not true or false"),
-            ("g=parallax:some", "parallax: `some` is not on or off"),
-            ("g=alpha:2", "alpha 2 must lie in [0, 1]"),
-            ("g=distance-alpha:-1", "distance-alpha -1 must lie in [0, 1]"),
-            ("g=surface-alpha:1.5", "surface-alpha 1.5 must lie in [0, 1]"),
-            ("g=speed:3", "unknown option `speed`"),
+            ("g=training-images:maybe", "training-images `maybe`: give combine or discard"),
+            ("g=parallax:some", "parallax `some`: give on or off"),
+            ("g=alpha:2", "alpha 2: give a probability in [0, 0.8]"),
+            ("g=distance-alpha:-1", "distance-alpha -1: give a probability"),
+            ("g=surface-alpha:1.5", "surface-alpha 1.5: give a probability"),
+            ("g=train-passes:2,train-share:0.1", "train-passes and train-share both"),
+            ("g=tracker:sideways", "tracker: unknown tracker `sideways`"),
+            ("g=speed:3", "unknown setting `speed`; the settings are guiding, alpha"),
+            ("g=speed:3", "parallax, or tracker"),
             ("g=guiding", "is not key:value"),
             ("bad name=guiding:full", "the name must be"),
         ] {

@@ -1,9 +1,9 @@
 //! The `zerovar` command on good and bad input: bad input must exit non-zero with an error
 //! naming the file and the place, and never panic.
 
-use zerovar_testkit::files::{repo, temp_dir, write};
 use std::path::Path;
 use std::process::{Command, Output};
+use zerovar_testkit::files::{repo, temp_dir, write};
 
 fn zerovar(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_zerovar")).args(args).output().unwrap()
@@ -146,6 +146,21 @@ fn bad_scenes_fail_clearly() {
             GOOD.replace("g = 0.2", "g = 1.0"),
             vec!["badg.toml:11:", "strictly between -1 and 1"],
         ),
+        (
+            "devzero.toml",
+            GOOD.replace("cloud.vol", "/dev/zero"),
+            vec!["devzero.toml:11:", "/dev/zero", "not a regular file"],
+        ),
+        (
+            "huge.toml",
+            GOOD.replace("resolution = [8, 6]", "resolution = [32768, 32768]"),
+            vec!["huge.toml:", "1073741824 pixels, more than 33554432", "lower the resolution"],
+        ),
+        (
+            "wide.toml",
+            GOOD.replace("resolution = [8, 6]", "resolution = [40000, 1]"),
+            vec!["wide.toml:", "between 1 and 32768 per axis"],
+        ),
     ];
     for (name, text, needles) in cases {
         assert_fails(&write(name, text), &needles);
@@ -182,7 +197,11 @@ fn bad_arguments_fail_clearly() {
         (vec!["render", s, "-D", "nosuch=1"], "nosuch"),
         (vec!["render", s, "-D", "novalue"], "KEY=VALUE"),
         (vec!["render", "/nonexistent/scene.toml"], "/nonexistent/scene.toml"),
-        (vec!["render", s, "--training-images", "keep"], "combine, discard"),
+        (vec!["render", "/dev/zero"], "not a regular file"),
+        (vec!["render", s, "--training-images", "keep"], "give combine or discard"),
+        (vec!["render", s, "--exposure", "128"], "from -64 to 64"),
+        (vec!["render", s, "--threads", "100000"], "give at most 1024"),
+        (vec!["render", s, "--time", "1e12"], "below 1e7"),
     ] {
         let o = zerovar(&args);
         let err = stderr(&o);
@@ -270,15 +289,24 @@ fn trains_a_field_and_renders_with_it() {
         stderr(&o)
     );
     for (args, needle) in [
-        (vec!["--guiding", "sideways"], "--guiding sideways"),
-        (vec!["--guiding", "full", "--alpha", "1.5"], "--alpha 1.5"),
+        (vec!["--guiding", "sideways"], "--guiding `sideways`: give off, directions"),
+        (vec!["--guiding", "full", "--alpha", "1.5"], "--alpha 1.5: give a probability"),
+        (vec!["--guiding", "full", "--alpha", "0.9"], "in [0, 0.8] (standard sampling keeps"),
+        (
+            vec!["--guiding", "directions", "--alpha", "0", "--surface-alpha", "0"],
+            "nothing would be",
+        ),
+        (vec!["--train-share", "0.2", "--train-passes", "3"], "cannot be used with"),
         (vec!["--guiding", "full", "--distance-alpha", "2"], "--distance-alpha 2"),
         (vec!["--guiding", "full", "--train-passes", "0"], "--train-passes 0"),
         // A field with nothing to guide would be loaded for nothing.
         (vec!["--guiding", "off", "--field", f], "--guiding off: rendering with --field"),
         // A saved field keeps the lobes it was trained with.
         (vec!["--field", f, "--parallax", "off"], "--parallax: a saved field keeps"),
-        (vec!["--guiding", "full", "--parallax", "sideways"], "invalid value 'sideways'"),
+        (
+            vec!["--guiding", "full", "--parallax", "sideways"],
+            "--parallax `sideways`: give on or off",
+        ),
     ] {
         let o = zerovar(&[&["render", s, "-o", e, "--quiet"][..], &args].concat());
         assert!(!o.status.success() && stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
@@ -426,7 +454,7 @@ fn reference_and_compare_end_to_end() {
         "--method",
         "x=speed:11",
     ]);
-    assert!(!o.status.success() && stderr(&o).contains("unknown option `speed`"), "{}", stderr(&o));
+    assert!(!o.status.success() && stderr(&o).contains("unknown setting `speed`"), "{}", stderr(&o));
     assert!(!stderr(&o).contains("panicked"));
 }
 
@@ -463,7 +491,8 @@ fn cli_checks_and_renders_xml_and_fails_cleanly() {
     ]);
     assert!(o.status.success() && out.is_file(), "{}", String::from_utf8_lossy(&o.stderr));
 
-    let bad = write("bad-cli.xml", GOOD_XML.replace("<float name=\"radius\"", "<float nam=\"radius\""));
+    let bad =
+        write("bad-cli.xml", GOOD_XML.replace("<float name=\"radius\"", "<float nam=\"radius\""));
     for cmd in ["check", "render"] {
         let o = run(&[cmd, bad.to_str().unwrap()]);
         let err = String::from_utf8_lossy(&o.stderr);
@@ -471,4 +500,64 @@ fn cli_checks_and_renders_xml_and_fails_cleanly() {
         assert!(!err.contains("panicked") && err.contains("bad-cli.xml:6:9"), "{err}");
         assert!(err.contains("<float> has no attribute `nam`"), "{err}");
     }
+}
+
+/// No output may replace an input or another output: each case fails before any work and
+/// leaves the input as it was.
+#[test]
+fn outputs_never_replace_inputs() {
+    write("keep.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let scene = write("keep.toml", GOOD.replace("cloud.vol", "keep.vol"));
+    let s = scene.to_str().unwrap();
+    let before = std::fs::read(&scene).unwrap();
+    let reference = temp_dir().join("keep-ref.exr");
+    let r = reference.to_str().unwrap();
+    let o = zerovar(&["reference", s, "-o", r, "--spp", "4", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let reference_before = std::fs::read(&reference).unwrap();
+    let dir = temp_dir();
+    let d = dir.to_str().unwrap();
+    let here = dir.join("keep.exr");
+    let e = here.to_str().unwrap();
+    let stats_on_png = dir.join("keep.png");
+    for (args, needle) in [
+        (vec!["render", s, "-o", e, "--stats", s, "--quiet"], "--stats"),
+        (
+            vec!["render", s, "-o", e, "--stats", stats_on_png.to_str().unwrap()],
+            "written there too",
+        ),
+        (vec!["train", s, "-o", s, "--quiet"], "-o"),
+        (
+            vec!["reference", s, "-o", r.replace("keep-ref.exr", "keep.toml").as_str(), "--quiet"],
+            ".exr",
+        ),
+        (
+            vec!["compare", s, "--reference", r, "--out", d, "--method", "keep-ref"],
+            "the keep-ref.exr of --out",
+        ),
+        (
+            vec![
+                "compare",
+                s,
+                "--reference",
+                r,
+                "--out",
+                d,
+                "--method",
+                "a",
+                "--method",
+                "a-error",
+            ],
+            "written there too",
+        ),
+    ] {
+        let o = zerovar(&args);
+        let err = stderr(&o);
+        assert!(
+            !o.status.success() && err.contains(needle) && !err.contains("panicked"),
+            "{args:?}: {err}"
+        );
+    }
+    assert_eq!(std::fs::read(&scene).unwrap(), before, "the scene was replaced");
+    assert_eq!(std::fs::read(&reference).unwrap(), reference_before, "the reference was replaced");
 }

@@ -22,8 +22,13 @@
 //! [`guided_flight`]).
 
 use super::RadianceCache;
-use super::equiangular::{Equiangular, PointLight};
+use super::equiangular::Equiangular;
+use super::flight::{
+    CUT, DirectStretch, direct_stretch, equiangular_share, exp, exp_m1, power_heuristic,
+};
+pub use super::flight::{ExtraCollision, GuidedEvent, GuidedFlight};
 use super::plain_flight::plain_flight;
+use crate::lights::PointLight;
 use crate::math::{Ray, Spectrum, is_grey, luminance, positive};
 use crate::media::{Medium, MediumKind};
 use crate::rng::Sampler;
@@ -33,9 +38,8 @@ use crate::tracking::{MediumRay, TrackedRay, transmittance_homogeneous};
 /// Equal segments of the guided stretch in guided flights: one, so a flight costs one cache
 /// lookup. Finer segments follow the in-scattered light along the ray more closely, but the
 /// regions are coarser than the segments and extra collisions already follow delta lights
-/// in 16 parts (light shaft, `compare --time 20`, seeds 1 / 2: 4 segments 0.0067 / 0.0066,
-/// 2 segments 0.0059 / 0.0064, 1 segment 0.0053 / 0.0052; per sample, 32 spp, 0.037 against
-/// 0.038 with 4, for 20% less time).
+/// in 16 parts: one segment gave the same error per sample in less time (see
+/// docs/experiments.md).
 pub const SEGMENTS: usize = 1;
 /// Most segments a distribution may have.
 pub const MAX_SEGMENTS: usize = 4;
@@ -43,9 +47,6 @@ pub const MAX_SEGMENTS: usize = 4;
 /// stretch: regions are coarser than the spacing of tentative collisions, and a lookup costs
 /// far more than a density lookup.
 const REFRESHES: usize = 4;
-/// The guided stretch ends where the standard transmittance falls to exp(-CUT); beyond it the
-/// rare remaining collisions follow the standard exponential.
-pub(super) const CUT: f32 = 8.0;
 /// Bounds of the guided per-segment probability relative to the standard one, so a cache
 /// that is wrong (zero, or off by orders of magnitude) can neither remove support nor force
 /// every path into one segment.
@@ -89,174 +90,6 @@ pub struct GuidedDistance {
     ///
     /// [`aim_at`]: Self::aim_at
     towards: Option<Equiangular>,
-}
-
-/// The share of an extra collision's density that aims at point lights (equiangular) where
-/// the ray has some, the rest following the direct-light grid. Half: a one-sample mixture of
-/// two strategies at one half each weighs no sample more than twice what either alone would,
-/// so it is never far from the better one, whatever the scene.
-pub(super) const EQUIANGULAR_SHARE: f32 = 0.5;
-
-/// The equiangular share of an extra collision's density for a ray whose grid parts are `d`:
-/// [`EQUIANGULAR_SHARE`] beside a grid with light along the ray, all of it where the grid has
-/// none (a spot light's cone, narrower near the light than the grid's cells, can fall between
-/// the parts' middles), nothing without point lights to aim at; `None` when neither knows of
-/// any light (no extra collision).
-pub(super) fn equiangular_share(d: &DirectStretch, towards: bool) -> Option<f32> {
-    match (d.total > 0.0 && d.total.is_finite(), towards) {
-        (true, true) => Some(EQUIANGULAR_SHARE),
-        (false, true) => Some(1.0),
-        (true, false) => Some(0.0),
-        (false, false) => None,
-    }
-}
-
-/// Parts of the guided stretch an extra collision for delta lights picks among: finer than
-/// the segments, because its cache lookups are cheap (see [`RadianceCache::direct`]).
-pub(super) const DIRECT_SEGMENTS: usize = 16;
-
-#[derive(Clone, Copy, Debug)]
-pub(super) struct DirectStretch {
-    pub(super) weights: [f32; DIRECT_SEGMENTS],
-    pub(super) total: f32,
-    /// The length of a part, and per channel the probability of colliding within one.
-    pub(super) length: f32,
-    pub(super) collide: Spectrum,
-    /// Per channel, the transmittance through one part.
-    pub(super) decay: Spectrum,
-}
-
-impl DirectStretch {
-    /// The part that holds ray parameter `t` of the stretch.
-    #[inline]
-    pub(super) fn part_of(&self, t: f32) -> usize {
-        ((t / self.length) as usize).min(DIRECT_SEGMENTS - 1)
-    }
-
-    /// The part a uniform `u` picks in proportion to the weights: the first whose cumulative
-    /// weight passes `u total`, or the last weighted one if rounding leaves `u total` past
-    /// them all; `None` when no part has any weight.
-    pub(super) fn pick(&self, u: f32) -> Option<usize> {
-        let v = u * self.total;
-        let mut below = 0.0;
-        (0..DIRECT_SEGMENTS)
-            .filter(|&j| self.weights[j] > 0.0)
-            .find(|&j| {
-                below += self.weights[j];
-                v < below
-            })
-            .or_else(|| (0..DIRECT_SEGMENTS).rev().find(|&j| self.weights[j] > 0.0))
-    }
-}
-
-/// The weights by which an extra collision for delta lights picks among the
-/// `DIRECT_SEGMENTS` equal parts of `ray`'s guided stretch `(0, guided_end)`, and their sum:
-/// the standard probability (channels mixed by `pick`, which sums to 1) of colliding in each
-/// part times the cache's delta-light in-scattering at its middle (HG with `g`). The tail past
-/// the stretch gets none (the flight's own collision covers it).
-pub(super) fn direct_stretch(
-    ray: &Ray,
-    guided_end: f32,
-    sigma: Spectrum,
-    pick: Spectrum,
-    g: f32,
-    cache: &mut impl RadianceCache,
-) -> DirectStretch {
-    let h = guided_end / DIRECT_SEGMENTS as f32;
-    let mut d = DirectStretch {
-        weights: [0.0; DIRECT_SEGMENTS],
-        total: 0.0,
-        length: h,
-        collide: Spectrum::ZERO,
-        decay: Spectrum::ONE,
-    };
-    let dir = ray.direction;
-    cache.direct_along(ray.origin, dir * h, dir, g, &mut d.weights);
-    if !d.weights.iter().any(|&w| w > 0.0) {
-        return d; // most rays miss a shaft of sunlight: no weights, no exponentials
-    }
-    let collide =
-        Spectrum::select(sigma.cmpgt(Spectrum::ZERO), -exp_m1(-sigma * h), Spectrum::ZERO);
-    let decay = exp(-sigma * h);
-    (d.collide, d.decay) = (collide, decay);
-    let mut mass = pick;
-    for w in &mut d.weights {
-        *w = positive_or_zero(mass.dot(collide) * *w);
-        d.total += *w;
-        mass *= decay;
-    }
-    d
-}
-
-/// Where a guided flight ended.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum GuidedEvent {
-    /// A real collision at `t` that scatters.
-    Scatter {
-        /// Ray parameter.
-        t: f32,
-    },
-    /// A real collision that absorbs the path (its emission is in `emitted`).
-    Absorb,
-    /// The flight passed the end of the ray.
-    Pass,
-}
-
-/// The outcome of a guided flight, as `tracking::Flight`.
-#[derive(Clone, Copy, Debug)]
-pub struct GuidedFlight {
-    /// The event.
-    pub event: GuidedEvent,
-    /// Multiplies the path throughput (zero after an absorption).
-    pub weight: Spectrum,
-    /// Emitted radiance collected, already multiplied by the incoming throughput.
-    pub emitted: Spectrum,
-    /// The standard strategy's density of this flight over the mixture's: how much guiding
-    /// multiplied the weight relative to standard tracking (1 when the flight was not
-    /// guided). The walk stops guiding paths whose guided decisions compounded too much.
-    pub gain: f32,
-    /// The MIS weight of next-event estimation of delta lights at a scattering collision
-    /// (1 unless `extra` estimates the same light too).
-    pub delta_share: f32,
-    /// A second collision, for next-event estimation of delta lights alone (see
-    /// [`guided_flight`]).
-    pub extra: Option<ExtraCollision>,
-}
-
-impl GuidedFlight {
-    pub(super) fn new(event: GuidedEvent, weight: Spectrum, gain: f32) -> Self {
-        Self { event, weight, emitted: Spectrum::ZERO, gain, delta_share: 1.0, extra: None }
-    }
-}
-
-/// A collision drawn only to estimate the light delta lights scatter into the ray there.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct ExtraCollision {
-    /// Ray parameter.
-    pub t: f32,
-    /// Multiplies the incoming throughput and the phase-weighted delta-light estimate at `t`:
-    /// `T(t) sigma_s(t)` over the extra collision's density there, times its power-heuristic
-    /// weight against the flight's own density (whose other half is the flight's
-    /// `delta_share`).
-    pub weight: Spectrum,
-}
-
-/// The power heuristic's weight (exponent 2) of a strategy of density `a` against one of
-/// density `b`, `a^2 / (a^2 + b^2)`, as a ratio so that no square overflows: 0 where `a` is 0.
-///
-/// It joins a flight's own collision and its extra collision for delta lights. The extra one
-/// follows the lit parts of the ray closely and the flight's own collision does not (it must
-/// also lead the path on), and where one strategy is much the better, the power heuristic
-/// gives it more of the estimate than the balance heuristic does: light shaft, 128 spp, seeds
-/// 1 / 2, relMSE 0.0088 / 0.0088 with the balance heuristic, 0.0083 / 0.0083 with this.
-#[inline]
-pub(super) fn power_heuristic(a: f32, b: f32) -> f32 {
-    if a > 0.0 {
-        let r = b / a;
-        1.0 / (1.0 + r * r)
-    } else {
-        0.0
-    }
 }
 
 impl GuidedDistance {
@@ -641,15 +474,14 @@ impl GuidedDistance {
 /// of delta lights combine by the power heuristic, for one shadow ray more. The flight's
 /// collision alone cannot follow single scattering closely: its density must also lead the
 /// path on, and mixing at `alpha` leaves even a perfectly guided estimate a relative variance
-/// of `1 / alpha - 1` (the standard half finds a shaft of sunlight only by chance).
-/// Measured on the light shaft (`zerovar compare`, full guiding, seeds 1 and 2): equal-time
-/// relMSE 0.0119 and 0.0114 without, 0.0082 and 0.0077 with. Other lights stay with the
-/// flight's own collision: their estimates are MIS-weighted against direction sampling, whose
-/// guided density an extra collision would have to load.
+/// of `1 / alpha - 1` (the standard half finds a shaft of sunlight only by chance). The extra
+/// collision lowers the error at equal time (see docs/experiments.md). Other lights stay with
+/// the flight's own collision: their estimates are MIS-weighted against direction sampling,
+/// whose guided density an extra collision would have to load.
 ///
 /// At `alpha` 0 in a grey, non-emissive homogeneous medium the flight takes the closed form of
-/// `plain_flight` (same densities, a quarter of the transcendental functions: light shaft,
-/// `compare --time 20`, seeds 1 / 2: relMSE 0.0044 / 0.0043 -> 0.0039 / 0.0037).
+/// `plain_flight`: the same densities from a quarter of the transcendental functions, so less
+/// error at equal time (see docs/experiments.md).
 #[allow(clippy::too_many_arguments)]
 pub fn guided_flight(
     medium: &Medium,
@@ -821,9 +653,9 @@ fn emissive_collision(
 /// media: the strategy is drawn once, and every event is weighted by the prefix's mixture
 /// density `alpha P_guided + (1 - alpha) P_std` (products of the per-event probabilities).
 /// Mixing event by event instead lets each null collision multiply the weight by up to
-/// `1 / (1 - alpha)`; over a long flight that compounds into rare, huge weights (measured:
-/// a cloud at g 0.8 missed its mean by 8.7 standard errors at 1024 spp). This way no weight
-/// exceeds `1 / (1 - alpha)` times the standard tracker's.
+/// `1 / (1 - alpha)`; over a long flight that compounds into rare, huge weights, enough for a
+/// cloud's render to miss its mean by many standard errors (see docs/experiments.md). This
+/// way no weight exceeds `1 / (1 - alpha)` times the standard tracker's.
 #[allow(clippy::too_many_arguments)]
 fn null_collision_flight(
     medium: &Medium,
@@ -919,32 +751,6 @@ fn null_collision_flight(
     }
     let weight = mixture(standard, ratio);
     GuidedFlight { emitted, ..GuidedFlight::new(GuidedEvent::Pass, weight, gain(ratio)) }
-}
-
-#[inline]
-fn positive_or_zero(v: f32) -> f32 {
-    if v > 0.0 && v.is_finite() { v } else { 0.0 }
-}
-
-#[inline]
-fn exp(v: Spectrum) -> Spectrum {
-    per_channel(v, f32::exp)
-}
-
-#[inline]
-fn exp_m1(v: Spectrum) -> Spectrum {
-    per_channel(v, f32::exp_m1)
-}
-
-/// `f` of each channel, once for a grey spectrum (most media are grey, and these run several
-/// times per flight).
-#[inline]
-fn per_channel(v: Spectrum, f: impl Fn(f32) -> f32) -> Spectrum {
-    if v.x == v.y && v.y == v.z {
-        Spectrum::splat(f(v.x))
-    } else {
-        Spectrum::new(f(v.x), f(v.y), f(v.z))
-    }
 }
 
 #[inline]

@@ -9,82 +9,13 @@
 //! light by the ray's distance from it. A spot light's density covers only the part of the
 //! ray inside its cone, where its light is.
 
+use crate::lights::PointLight;
 use crate::math::Ray;
 use arrayvec::ArrayVec;
-use glam::Vec3A;
 
 /// Point lights an equiangular density aims at; further ones are left to the other
 /// strategies (a sampling density may ignore them without bias).
 pub(super) const MAX_POINT_LIGHTS: usize = 8;
-
-/// A point or spot light as equiangular sampling sees it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PointLight {
-    /// Where it is.
-    pub position: Vec3A,
-    /// A spot light's cone: its unit axis and the cosine of its cutoff half-angle.
-    pub cone: Option<(Vec3A, f32)>,
-}
-
-impl PointLight {
-    /// The part of `(0, end)` of `ray` the light reaches: inside a spot light's cone (a
-    /// little wider, for rounding), all of it for a point light or a cone of 90 degrees or
-    /// more; `None` if empty.
-    fn reach(&self, ray: &Ray, end: f32) -> Option<(f32, f32)> {
-        let Some((axis, cos_cutoff)) = self.cone.filter(|c| c.1 > 0.02) else {
-            return Some((0.0, end));
-        };
-        // Inside the forward cone: ((v + t d).a)^2 >= cos^2 |v + t d|^2 with (v + t d).a >= 0.
-        let v = ray.origin - self.position;
-        let (da, va) = (ray.direction.dot(axis), v.dot(axis));
-        let cos2 = cos_cutoff * cos_cutoff;
-        let a = da * da - cos2;
-        let b = 2.0 * (da * va - cos2 * ray.direction.dot(v));
-        let c = va * va - cos2 * v.length_squared();
-        // The forward half-space of the apex.
-        let (mut lo, mut hi) = (0.0f32, end);
-        if da > 0.0 {
-            lo = lo.max(-va / da);
-        } else if da < 0.0 {
-            hi = hi.min(-va / da);
-        } else if va < 0.0 {
-            return None;
-        }
-        // Where the quadratic is non-negative, within the forward half-space: one interval,
-        // the cone being convex. A ray steeper than the cone (a > 0) crosses both nappes, and
-        // its forward part lies past the larger root when it heads along the axis, before
-        // the smaller one otherwise; a shallower one (a < 0) is inside between the roots.
-        let disc = b * b - 4.0 * a * c;
-        if a.abs() <= 1e-12 {
-            // Parallel to the cone's surface: the quadratic is linear.
-            if b > 0.0 {
-                lo = lo.max(-c / b);
-            } else if b < 0.0 {
-                hi = hi.min(-c / b);
-            } else if c < 0.0 {
-                return None;
-            }
-        } else if disc < 0.0 {
-            if a < 0.0 {
-                return None;
-            }
-        } else {
-            let q = -0.5 * (b + b.signum() * disc.sqrt());
-            let (r1, r2) = if q != 0.0 { (q / a, c / q) } else { (0.0, 0.0) };
-            let (r1, r2) = (r1.min(r2), r1.max(r2));
-            if a < 0.0 {
-                (lo, hi) = (lo.max(r1), hi.min(r2));
-            } else if da > 0.0 {
-                lo = lo.max(r2);
-            } else {
-                hi = hi.min(r1);
-            }
-        }
-        let pad = 1e-4 * (hi - lo).abs().max(1e-3);
-        let (lo, hi) = ((lo - pad).max(0.0), (hi + pad).min(end));
-        (hi > lo).then_some((lo, hi))
-    }
-}
 
 /// One light seen from the ray: the ray parameter of its foot on the ray, its distance from
 /// the ray, the stretch it reaches, and the angles that stretch spans as seen from it.
@@ -160,6 +91,7 @@ impl Equiangular {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use glam::Vec3A;
     use zerovar_testkit::{chi2_1d, equal_mass_edges, integrate_1d};
 
     fn point(position: Vec3A) -> PointLight {

@@ -9,7 +9,7 @@
 //! light uniformly within a cap (density `1 / (2 pi theta_cap sin theta)`), which follows the
 //! spike, and mixed in at a small share it bounds those weights.
 
-use crate::guided::PointLight;
+use crate::lights::PointLight;
 use crate::math::Frame;
 use arrayvec::ArrayVec;
 use glam::{Vec2, Vec3A};

@@ -11,13 +11,13 @@
 
 pub mod distance;
 mod equiangular;
+mod flight;
 mod grid;
 pub mod halo;
 mod plain_flight;
 mod saved;
 pub mod window;
 
-pub use equiangular::PointLight;
 pub use grid::DirectGrid;
 pub use saved::{TRAINED_MAGIC, TRAINED_VERSION, TrainedField};
 
@@ -146,13 +146,9 @@ pub struct Estimates {
 pub const PRODUCT_MIN_G: f32 = 0.05;
 /// Smallest `|g|` for which the product is the exact one (every mixture lobe times each of
 /// the four lobes of HG's fit); below it the mixture's lobes are only reweighted by their
-/// convolution with HG (`VolumeDistribution::apply_hg_weights`), at about a third of the cost
-/// (`cargo bench -p zerovar-guiding`: per vertex, load and product, a sample and a density,
-/// 0.43 us against 1.2 us).
-/// Measured at equal samples (`zerovar compare`, 32 spp, full guiding, training included):
-/// light shaft (g 0.6) relMSE 0.073 reweighted vs 0.069 exact in 8.8 vs 12.1 s; occluded
-/// light (g 0.3) 0.103 reweighted vs 0.151 with no product; back-lit cloud (g 0.85, 16 spp)
-/// 1.02 reweighted vs 0.20 exact: strongly forward scattering needs the reshaped lobes.
+/// convolution with HG (`VolumeDistribution::apply_hg_weights`), at about a third of the cost.
+/// At moderate `g` that loses little against the exact product and far beats none; strongly
+/// forward scattering needs the reshaped lobes (see docs/experiments.md).
 pub const EXACT_PRODUCT_MIN_G: f32 = 0.7;
 
 /// A trained guiding field as a radiance cache, with its per-thread query state.
@@ -346,10 +342,8 @@ impl RadianceCache for FieldCache<'_> {
     #[inline]
     fn product_cosine(&mut self, _normal: Vec3A) -> bool {
         // The incident radiance alone. Both cosine products lower the error a little and
-        // cost more than they save (light shaft, full guiding, 32 spp: relMSE 0.073 without,
-        // 0.069 with the exact product, 0.070 with lobes reweighted by their clamped cosine,
-        // which made a 16 spp single-thread render 9% slower; occluded light 0.103, 0.104,
-        // 0.098): equal efficiency within noise, so the cheaper way.
+        // cost more than they save: equal efficiency within noise, so the cheaper way (see
+        // docs/experiments.md).
         self.dist.clear_product();
         true
     }

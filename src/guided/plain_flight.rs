@@ -9,11 +9,12 @@
 //! The densities are those `GuidedDistance` reports for the same flight (a test compares them).
 
 use super::RadianceCache;
-use super::distance::{
+use super::equiangular::Equiangular;
+use super::flight::{
     CUT, DirectStretch, ExtraCollision, GuidedEvent, GuidedFlight, direct_stretch,
     equiangular_share, power_heuristic,
 };
-use super::equiangular::{Equiangular, PointLight};
+use crate::lights::PointLight;
 use crate::math::{Ray, Spectrum};
 use crate::rng::Sampler;
 

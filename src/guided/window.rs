@@ -17,14 +17,9 @@ pub const FLOOR_SHARE: f32 = 1.0;
 /// What every pixel's estimate gets added, so that black and near-black pixels do not make
 /// every path look too bright and split without end: a share of the image's mean, never a
 /// constant, so that the windows (and with them every guided decision) do not depend on the
-/// scene's units. An absolute floor of 0.01 made the light shaft with a sun 100x dimmer
-/// render with 18x the relMSE (32 spp: 1.13 against 0.062), worse than unguided. The whole
+/// scene's units (an absolute floor made a dimly lit scene worse than unguided). The whole
 /// mean rouletted more of the dim pixels' paths than half of it did, and they were cheaper
-/// for about as much error (`compare --time 20`, seeds 1 / 2, half against whole: light shaft
-/// 0.0048 / 0.0050 against 0.0047 / 0.0047, occluded light 0.0166 / 0.0163 against
-/// 0.0147 / 0.0144, back-lit cloud 0.0227 / 0.0237 against 0.0235 / 0.0223); a tenth and
-/// a quarter were worse on the light shaft (0.0057, 0.0052), and so were twice and four
-/// times (0.0051, 0.0069).
+/// for about as much error; smaller and larger shares were worse (see docs/experiments.md).
 pub fn floor(estimates: &[f32]) -> f32 {
     if estimates.is_empty() {
         return 0.0;

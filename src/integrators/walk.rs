@@ -55,11 +55,9 @@ pub const MAX_ALPHA: f32 = 0.8;
 /// dense cloud walks dozens of vertices) into rare, huge weights; past this the path samples
 /// as if unguided, so its guided decisions never multiply its weight by more than
 /// `MAX_GUIDED_GAIN / (1 - alpha)`. The switch depends on the path's past alone, which keeps
-/// every estimator unbiased. Weight windows split such paths instead (and with them the bound
-/// cost 6-9% of full guiding's equal-spp error on the light shaft and the occluded light).
-/// Measured on the tests' cloud (g 0.8, directions alone at alpha 0.8, 48 seeds of 256 spp):
-/// the spread of a quadrant's mean fell from 0.0075 to 0.0027 (unguided: 0.0024); back-lit
-/// cloud, directions alone, 32 spp: relMSE 2.5 before, 0.86 with it, against 0.61 unguided.
+/// every estimator unbiased. Weight windows split such paths instead (with them the bound
+/// only added error); without them it keeps guided directions in a dense cloud from doing far
+/// worse than unguided sampling (see docs/experiments.md).
 pub const MAX_GUIDED_GAIN: f32 = 8.0;
 
 /// Settings of the walk.
@@ -127,7 +125,7 @@ struct PathState {
 /// Split copies waiting to be traced, and how many walks this camera sample has made.
 struct Branches {
     /// Uninitialised until pushed: most camera samples never split, and filling a full array
-    /// of states for each of them showed in profiles (memmove, 4-5% of a guided render).
+    /// of states for each of them showed in profiles (memmove; see docs/experiments.md).
     stack: ArrayVec<PathState, STACK>,
     walks: usize,
 }

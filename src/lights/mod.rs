@@ -7,8 +7,10 @@
 //! sampling against phase and BSDF sampling with MIS; delta lights report `delta`.
 
 mod envmap;
+mod point;
 
 pub use envmap::EnvMap;
+pub use point::PointLight;
 
 use crate::math::{Frame, Spectrum, uniform_cone};
 use crate::shapes::Geometry;
@@ -97,8 +99,7 @@ impl Light {
     }
 
     /// A point or spot light as equiangular sampling aims at it.
-    pub fn point_light(&self) -> Option<crate::guided::PointLight> {
-        use crate::guided::PointLight;
+    pub fn point_light(&self) -> Option<PointLight> {
         match self {
             Light::Point { position, .. } => Some(PointLight { position: *position, cone: None }),
             Light::Spot { position, frame, cutoff, .. } => {

@@ -167,8 +167,8 @@ impl VdbGrid {
     /// Reads the grid named `name`, or by default the grid `density` or else the file's only
     /// float grid.
     pub fn read(path: &Path, name: Option<&str>) -> Result<Self> {
-        let bytes =
-            std::fs::read(path).map_err(|source| VdbError::Io { path: path.into(), source })?;
+        let bytes = crate::files::read(path)
+            .map_err(|source| VdbError::Io { path: path.into(), source })?;
         Self::parse(path, &bytes, name)
     }
 

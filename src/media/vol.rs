@@ -123,8 +123,8 @@ impl VolGrid {
     /// Reads and validates a grid: every value must be finite and non-negative, since it is a
     /// density or an albedo.
     pub fn read(path: &Path) -> Result<Self, VolError> {
-        let bytes =
-            std::fs::read(path).map_err(|source| VolError::Io { path: path.into(), source })?;
+        let bytes = crate::files::read(path)
+            .map_err(|source| VolError::Io { path: path.into(), source })?;
         Self::parse(path, &bytes)
     }
 

@@ -54,7 +54,7 @@ pub(super) fn combine_by_inverse_variance(training: &[Film], last: &Film) -> Vec
         .iter()
         .map(|r| {
             let m = f64::from(crate::math::luminance(glam::Vec3A::from(r.mean())));
-            1.0 / (m * m + crate::metrics::EPSILON)
+            1.0 / (m * m + crate::math::RELATIVE_EPSILON)
         })
         .collect();
     let weights: Vec<f64> = films

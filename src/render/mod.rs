@@ -21,14 +21,19 @@ mod fireflies;
 mod options;
 mod passes;
 mod select;
+mod settings;
+mod stats;
 mod training;
 
 pub use fireflies::{Firefly, FireflyReport};
 pub use options::{
     Budget, DEFAULT_DISTANCE_ALPHA, DEFAULT_SURFACE_ALPHA, DEFAULT_TRAIN_SHARE, GuidingOptions,
-    MAX_TRAIN_PASSES, OptionsError, RenderOptions, TrainBudget, parse_guiding,
+    MAX_ALPHA, MAX_THREADS, MAX_TRAIN_PASSES, OptionsError, RenderOptions, TrainBudget,
+    parse_guiding,
 };
 pub use select::Selection;
+pub use settings::{SETTINGS, Setting, SettingError, TRAIN_BUDGET, setting};
+pub use stats::{RenderStats, TrainingStats};
 pub use training::{TrainingReport, TrainingStop};
 
 use combine::{combine_by_inverse_variance, pixel_estimates};

@@ -2,6 +2,7 @@
 //! the rules they must meet ([`RenderOptions::validate`]).
 
 use crate::guided::Components;
+pub use crate::integrators::walk::MAX_ALPHA;
 use std::time::Duration;
 use zerovar_guiding::FieldConfig;
 
@@ -42,25 +43,25 @@ pub const DEFAULT_TRAIN_SHARE: f32 = 0.25;
 pub struct GuidingOptions {
     /// Which decisions are guided; nothing guided means no training.
     pub components: Components,
-    /// Probability of the guided strategy in every mixture in media, in [0, 1].
+    /// Probability of the guided strategy in every mixture in media, in [0, [`MAX_ALPHA`]].
     pub alpha: f32,
-    /// Probability of the guided strategy in every mixture at surfaces, in [0, 1]
+    /// Probability of the guided strategy in every mixture at surfaces, in [0, [`MAX_ALPHA`]]
     /// ([`DEFAULT_SURFACE_ALPHA`]).
     pub surface_alpha: f32,
     /// Probability of the zero-variance collision density in guided flights' mixture with
-    /// standard tracking, in [0, 1] ([`DEFAULT_DISTANCE_ALPHA`]); guided flights take their
-    /// extra collisions for delta lights whatever it is.
+    /// standard tracking, in [0, [`MAX_ALPHA`]] ([`DEFAULT_DISTANCE_ALPHA`]); guided flights
+    /// take their extra collisions for delta lights whatever it is.
     pub distance_alpha: f32,
     /// Training budget.
     pub train: TrainBudget,
     /// Settings of a new field.
     pub field: FieldConfig,
     /// Combine the training passes' images with the render's by inverse variance, rather than
-    /// discarding them (the default: at equal time it lowered relMSE 6-14% on the light
-    /// shaft, the back-lit cloud and the occluded light, and changed nothing where guiding
-    /// does not pay). The weights follow relMSE's, so unlike the render phase's samples they
-    /// depend a little on the scene's units; each image's weight is one number, so the result
-    /// stays unbiased whatever they are.
+    /// discarding them (the default: at equal time it lowers the error where guiding pays and
+    /// changes nothing where it does not; see docs/experiments.md). The weights follow
+    /// relMSE's, so unlike the render phase's samples they depend a little on the scene's
+    /// units. Each weight is estimated from the image it weighs, so the combination is
+    /// consistent but not exactly unbiased; discarding the training images is.
     pub combine_training: bool,
     /// Guide only the 16x16 tiles where a pilot after training finds guiding more efficient
     /// than unguided sampling (see [`Selection`](super::Selection)); the others render unguided.
@@ -139,8 +140,9 @@ impl RenderOptions {
         Self { budget, seed, threads: None, guiding: GuidingOptions::default(), fireflies: 0 }
     }
 
-    /// Checks every setting; [`render`](super::render), [`render_with_field`](super::render_with_field) and [`train`](super::train) call it before
-    /// any work, so options assembled in code meet the same rules as the CLI's.
+    /// Checks every setting; [`render`](super::render),
+    /// [`render_with_field`](super::render_with_field) and [`train`](super::train) call it
+    /// before any work, so options assembled in code meet the same rules as the CLI's.
     pub fn validate(&self) -> Result<(), OptionsError> {
         match self.budget {
             Budget::Samples(0) => return Err(OptionsError::ZeroSamples),
@@ -150,29 +152,55 @@ impl RenderOptions {
         if self.threads == Some(0) {
             return Err(OptionsError::ZeroThreads);
         }
-        let g = &self.guiding;
-        if !(0.0..=1.0).contains(&g.alpha) {
-            return Err(OptionsError::Alpha(g.alpha));
+        if let Some(n) = self.threads.filter(|&n| n > MAX_THREADS) {
+            return Err(OptionsError::TooManyThreads(n));
         }
-        if !(0.0..=1.0).contains(&g.surface_alpha) {
-            return Err(OptionsError::SurfaceAlpha(g.surface_alpha));
-        }
-        if !(0.0..=1.0).contains(&g.distance_alpha) {
-            return Err(OptionsError::DistanceAlpha(g.distance_alpha));
-        }
-        match g.train {
-            TrainBudget::Passes(n) if n == 0 || n > MAX_TRAIN_PASSES => {
-                Err(OptionsError::TrainPasses(n))
-            }
-            TrainBudget::Time(t) if t.is_zero() => Err(OptionsError::ZeroTrainTime),
-            TrainBudget::Share(s) if !(s > 0.0 && s < 1.0) => Err(OptionsError::TrainShare(s)),
-            TrainBudget::Time(t) if matches!(self.budget, Budget::Time(b) if t >= b) => {
+        self.guiding.validate()?;
+        match (self.guiding.train, self.budget) {
+            (TrainBudget::Time(t), Budget::Time(b)) if t >= b => {
                 Err(OptionsError::TrainTimeOverBudget)
             }
             _ => Ok(()),
         }
     }
 }
+
+impl GuidingOptions {
+    /// Checks the guiding settings (what [`RenderOptions::validate`] checks of them).
+    pub fn validate(&self) -> Result<(), OptionsError> {
+        let probability = |a: f32| (0.0..=MAX_ALPHA).contains(&a);
+        if !probability(self.alpha) {
+            return Err(OptionsError::Alpha(self.alpha));
+        }
+        if !probability(self.surface_alpha) {
+            return Err(OptionsError::SurfaceAlpha(self.surface_alpha));
+        }
+        if !probability(self.distance_alpha) {
+            return Err(OptionsError::DistanceAlpha(self.distance_alpha));
+        }
+        let c = self.components;
+        if c.directions
+            && !c.distances
+            && !c.roulette
+            && self.alpha == 0.0
+            && self.surface_alpha == 0.0
+        {
+            return Err(OptionsError::NothingGuided);
+        }
+        match self.train {
+            TrainBudget::Passes(n) if n == 0 || n > MAX_TRAIN_PASSES => {
+                Err(OptionsError::TrainPasses(n))
+            }
+            TrainBudget::Time(t) if t.is_zero() => Err(OptionsError::ZeroTrainTime),
+            TrainBudget::Share(s) if !(s > 0.0 && s < 1.0) => Err(OptionsError::TrainShare(s)),
+            _ => Ok(()),
+        }
+    }
+}
+
+/// The most worker threads a render takes: far more than any machine's cores, and few enough
+/// that per-thread buffers cannot exhaust memory.
+pub const MAX_THREADS: usize = 1024;
 
 /// The most training passes [`TrainBudget::Passes`] takes: pass k renders 2^k spp, so 20
 /// passes are already a million samples per pixel.
@@ -182,23 +210,15 @@ pub const MAX_TRAIN_PASSES: u32 = 20;
 /// collisions for delta lights (placed by the field's direct-light grid), but their own
 /// collision follows standard tracking: the zero-variance collision density needs a field
 /// lookup per flight, and at equal time that cost more than it saved on every bench scene
-/// (`compare --time 20`, full guiding, seeds 1 / 2, at alpha 0.5 against 0: light shaft
-/// 0.0045 / 0.0045 against 0.0040 / 0.0041, occluded light 0.0147 / 0.0148 against
-/// 0.0127 / 0.0130, back-lit cloud 0.0235 / 0.0223 against 0.0205 / 0.0218; on the light shaft
-/// 0.1, 0.2 and 0.3 gave 0.0045, 0.0043 and 0.0043, and guiding only the camera ray's flight
-/// 0.0042). The in-scattered light it follows is mostly the delta lights' single scattering,
-/// which the extra collisions already place; what is left varies slowly along a ray.
+/// (see docs/experiments.md). The in-scattered light it follows is mostly the delta lights'
+/// single scattering, which the extra collisions already place; what is left varies slowly
+/// along a ray.
 pub const DEFAULT_DISTANCE_ALPHA: f32 = 0.0;
 
 /// The default [`GuidingOptions::surface_alpha`]: at a diffuse surface the standard strategy
 /// (cosine sampling) covers the whole hemisphere and a dark wall sends most of its samples
 /// into the dark, so a smaller defensive share pays there than in a medium, whose phase
-/// sampling the field's product with HG only approximates. Per sample (`compare --spp 128`,
-/// light shaft, seeds 1-4, media at 0.5): surfaces at 0.5 gave 0.0085 / 0.0083 / 0.0084 /
-/// 0.0083, at 0.7 0.0079 / 0.0081 / 0.0080 / 0.0079 (0.3: 0.0092, 0.8: 0.0080, 0.9: 0.0081
-/// with seed 1); occluded light, 64 spp, seeds 1-4: 0.115 summed at 0.5 against 0.109; media
-/// at 0.4 or 0.6 with surfaces at 0.7 were worse (seeds 1 / 3: 0.0083 / 0.0081, 0.0080 /
-/// 0.0080 against 0.0079 / 0.0080).
+/// sampling the field's product with HG only approximates (see docs/experiments.md).
 pub const DEFAULT_SURFACE_ALPHA: f32 = 0.7;
 
 /// Why [`RenderOptions::validate`] refused the options.
@@ -213,23 +233,38 @@ pub enum OptionsError {
     /// Zero worker threads.
     #[error("0 threads: give at least one, or `None` for every core")]
     ZeroThreads,
-    /// The guided strategy's probability is outside [0, 1] (or NaN).
-    #[error("alpha {0}: give a probability in [0, 1]")]
+    /// More worker threads than [`MAX_THREADS`].
+    #[error("{0} threads: give at most 1024 (each holds its own tile buffers)")]
+    TooManyThreads(usize),
+    /// The guided strategy's probability is outside [0, [`MAX_ALPHA`]] (or NaN).
+    #[error(
+        "alpha {0}: give a probability in [0, 0.8] (standard sampling keeps at least 20%, which bounds every guided weight)"
+    )]
     Alpha(f32),
-    /// The guided strategy's probability at surfaces is outside [0, 1] (or NaN).
-    #[error("surface alpha {0}: give a probability in [0, 1]")]
+    /// The guided strategy's probability at surfaces is outside [0, [`MAX_ALPHA`]] (or NaN).
+    #[error(
+        "surface-alpha {0}: give a probability in [0, 0.8] (standard sampling keeps at least 20%, which bounds every guided weight)"
+    )]
     SurfaceAlpha(f32),
-    /// The zero-variance collision density's probability is outside [0, 1] (or NaN).
-    #[error("distance alpha {0}: give a probability in [0, 1]")]
+    /// The zero-variance collision density's probability is outside [0, [`MAX_ALPHA`]] (or
+    /// NaN).
+    #[error(
+        "distance-alpha {0}: give a probability in [0, 0.8] (standard tracking keeps at least 20%, which bounds every guided weight)"
+    )]
     DistanceAlpha(f32),
+    /// Directions alone are guided, at alpha 0 in media and at surfaces: nothing would be.
+    #[error(
+        "directions are guided at alpha 0 and surface-alpha 0, so nothing would be: give a positive alpha or surface-alpha, or guide something else"
+    )]
+    NothingGuided,
     /// A number of training passes outside 1..=[`MAX_TRAIN_PASSES`].
-    #[error("{0} training passes: give 1 to 20 (pass k renders 2^k spp)")]
+    #[error("train-passes {0}: give 1 to 20 (pass k renders 2^k spp)")]
     TrainPasses(u32),
     /// A training time of zero.
-    #[error("a training time of zero: give a positive duration")]
+    #[error("train-time 0: give a positive number of seconds")]
     ZeroTrainTime,
     /// A training share outside (0, 1) (or NaN).
-    #[error("training share {0}: give a fraction of the budget above 0 and below 1")]
+    #[error("train-share {0}: give a fraction of the budget above 0 and below 1")]
     TrainShare(f32),
     /// A training time as long as the whole time budget, or longer.
     #[error(

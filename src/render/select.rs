@@ -17,7 +17,7 @@ use super::{
 use crate::film::Film;
 use crate::guided::Components;
 use crate::integrators::walk::WalkSettings;
-use crate::metrics::EPSILON;
+use crate::math::RELATIVE_EPSILON as EPSILON;
 use crate::rng::mix64;
 use crate::scene::Scene;
 use crate::stats::Counters;
@@ -26,11 +26,10 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Instant;
 
 /// Nanoseconds of one thread per counted operation: a non-negative least-squares fit (relative
-/// error) to the render times of the ten example and bench scenes, each unguided, fully guided
-/// and with each component alone (50 renders, 1 thread, 8 spp after 4 training passes;
-/// `tools/fit-cost-model.py`, refitted after shadow rays took one traversal and flights one
-/// segment). The fit's rms error is 10% (worst 23%); it predicts each scene's cost of a fully
-/// guided sample relative to an unguided one within 25%.
+/// error) to single-thread render times of the ten example and bench scenes, each unguided,
+/// fully guided and with each component alone (`tools/fit-cost-model.py`). It predicts a
+/// guided sample's cost relative to an unguided one closely enough to choose by (see
+/// docs/experiments.md).
 const NS_PER_PATH: f64 = 35.0;
 const NS_PER_SEGMENT: f64 = 96.0;
 const NS_PER_SCATTER: f64 = 61.0;
@@ -95,8 +94,7 @@ pub(crate) fn cost(c: &Counters) -> f64 {
 /// The guided strategies a pilot weighs against unguided sampling: the requested components,
 /// and weight-window roulette alone when they include it with more. Roulette alone costs a
 /// field lookup per vertex where guided distances and product directions cost several, and
-/// in dense, bright media it gives most of their gain (back-lit cloud, `compare --time 20`:
-/// error ratio 1.88-2.03 for roulette alone, 1.70 with everything guided, one run each).
+/// in dense, bright media it gives most of their gain (see docs/experiments.md).
 fn candidates(requested: Components) -> Vec<Components> {
     let mut list = vec![requested];
     if requested.roulette && (requested.directions || requested.distances) {
@@ -115,11 +113,9 @@ pub(super) struct Choice {
     pub selection: Selection,
 }
 
-/// The fewest samples per pixel of the pilot that chooses the tiles to render guided: a
-/// 2-sample variance is so noisy that the choice follows it (on the occluded light, trained
-/// for 5 s, a 2 spp pilot left 50 of 180 tiles unguided and doubled the error), and with 4
-/// the occluded light's heavy-tailed samples still made two of four seeds prefer roulette
-/// alone, at 1.65x full guiding's error; with 8 all four chose full guiding.
+/// The fewest samples per pixel of the pilot that chooses the tiles to render guided: with
+/// fewer, its variance estimates are so noisy that the choice follows their noise, most of
+/// all where samples are heavy-tailed (see docs/experiments.md).
 pub(super) const MIN_TILE_PILOT_SPP: u32 = 8;
 
 /// Runs the pilot with `guidance`'s field; returns which tiles to guide and how, or `None`
@@ -303,14 +299,9 @@ struct TileMeasure {
     unguided_cost: f64,
 }
 
-/// How much more a choice that leaves some tiles unguided must gain than guiding every tile.
-/// On the occluded light, whose unguided samples are heavy-tailed, the pilot left 1 to 28 of
-/// 180 tiles unguided with three of four seeds; with a margin of 1.25 it guided them all, with
-/// equal or lower error (relMSE 0.038 -> 0.034 with the seed that left 28 out). With 8 spp
-/// pilots seed 0 still left 26 tiles out on a modelled 1.72x (6.94 against 4.04 guiding
-/// everywhere), and its fireflies made the error 0.0336 against 0.0253 with every tile guided
-/// (`compare --time 20`); a margin of 2 guides them, and changed no choice on the back-lit
-/// cloud, the light shaft (seeds 0 and 4) or the occluded light's seeds 4 and 5.
+/// How much more a choice that leaves some tiles unguided must gain than guiding every tile:
+/// the best-looking choice is picked under the pilot's noise, and where unguided samples are
+/// heavy-tailed, the tiles a smaller margin left out drew fireflies (see docs/experiments.md).
 const PARTIAL_MARGIN: f64 = 2.0;
 
 /// Tiles within this many tiles (a square) pool their pilots for the choice.

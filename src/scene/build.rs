@@ -19,6 +19,10 @@ use glam::{Vec2, Vec3, Vec3A};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
+/// Most pixels a camera may have: a film holds 72 bytes per pixel, and a render keeps several
+/// (training passes, the render phase), so 2^25 pixels stay within a few gigabytes.
+const MAX_PIXELS: u64 = 1 << 25;
+
 /// The file being built and the element being looked at, for error messages.
 struct Ctx<'a> {
     path: &'a Path,
@@ -174,6 +178,14 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
     if cam.resolution.contains(&0) || cam.resolution.iter().any(|&r| r > 1 << 15) {
         return cx
             .err(format!("resolution {:?} must be between 1 and 32768 per axis", cam.resolution));
+    }
+    let pixels = u64::from(cam.resolution[0]) * u64::from(cam.resolution[1]);
+    if pixels > MAX_PIXELS {
+        return cx.err(format!(
+            "resolution {:?} is {pixels} pixels, more than {MAX_PIXELS} (8192 x 4096): a render holds \
+             about 72 bytes per pixel in each of several images; lower the resolution",
+            cam.resolution
+        ));
     }
     let camera = Camera::new(to_world, cam.fov, cam.fov_axis, cam.resolution);
     let camera_medium = lookup(&cx, "camera medium", &cam.medium, global_medium)?;

@@ -18,7 +18,7 @@ use crate::lights::Light;
 use crate::math::{Aabb, RAY_EPSILON, Ray};
 use crate::media::Medium;
 use crate::shapes::{Geometry, SurfaceHit};
-use crate::tracking::Tracker;
+use crate::tracking::{Tracker, TrackerChoice, TrackerError};
 use glam::Vec3A;
 use std::path::{Path, PathBuf};
 use thiserror::Error;
@@ -189,7 +189,7 @@ pub struct Scene {
     /// Indices of delta lights (guided flights draw extra collisions for them).
     pub(crate) delta_lights: Vec<u32>,
     /// Positions of the point and spot lights (extra collisions aim at them).
-    pub(crate) point_lights: Vec<crate::guided::PointLight>,
+    pub(crate) point_lights: Vec<crate::lights::PointLight>,
     /// The camera.
     pub(crate) camera: Camera,
     /// The medium around the camera.
@@ -203,7 +203,7 @@ pub struct Scene {
 /// Loads, validates and compiles a scene file: TOML, or a Mitsuba 3 scene if the name ends in
 /// `.xml`. `defines` override `[defaults]` (TOML) or `<default>` (XML) entries.
 pub fn load(path: &Path, defines: &[(String, String)]) -> Result<Scene, SceneError> {
-    let source = std::fs::read_to_string(path)
+    let source = crate::files::read_to_string(path)
         .map_err(|error| SceneError::Io { path: path.to_path_buf(), error })?;
     load_str(path, &source, defines)
 }
@@ -271,6 +271,14 @@ impl Scene {
     /// Each shape's surface (same indices as [`Scene::shapes`]).
     pub fn surfaces(&self) -> &[Surface] {
         &self.surfaces
+    }
+
+    /// Re-chooses every medium's tracker; an error (and no change) if a forced tracker cannot
+    /// apply to some medium.
+    pub fn set_tracker(&mut self, choice: TrackerChoice) -> Result<(), TrackerError> {
+        let trackers = self.media.iter().map(|m| choice.pick(m)).collect::<Result<Vec<_>, _>>()?;
+        self.trackers = trackers;
+        Ok(())
     }
 
     /// The integrator settings and the defaults of a render.

@@ -109,6 +109,7 @@ impl Mesh {
     ) -> Result<Self, MeshError> {
         let options =
             tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
+        crate::files::check(path)?;
         let (models, _) =
             tobj::load_obj(path, &options).map_err(|e| MeshError::Obj(e.to_string()))?;
         let (mut positions, mut normals, mut uvs, mut indices) = (vec![], vec![], vec![], vec![]);
@@ -143,7 +144,7 @@ impl Mesh {
         to_world: &Transform,
         face_normals: bool,
     ) -> Result<Self, MeshError> {
-        Self::from_ply_bytes(&std::fs::read(path)?, to_world, face_normals)
+        Self::from_ply_bytes(&crate::files::read(path)?, to_world, face_normals)
     }
 
     /// `from_ply` on the file's bytes.

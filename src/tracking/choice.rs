@@ -3,7 +3,6 @@
 
 use super::Tracker;
 use crate::media::{Medium, MediumKind};
-use crate::scene::Scene;
 use std::str::FromStr;
 use thiserror::Error;
 
@@ -29,7 +28,7 @@ pub enum TrackerError {
         known: String,
     },
     /// The forced tracker cannot handle a medium of the scene.
-    #[error("--tracker: {0}")]
+    #[error("tracker: {0}")]
     Inapplicable(String),
 }
 
@@ -94,7 +93,7 @@ impl Tracker {
     /// Why `auto` picks this tracker for `medium` (or that it was forced).
     pub fn reason(&self, medium: &Medium) -> &'static str {
         if *self != Tracker::for_medium(medium) {
-            return "forced by --tracker";
+            return "forced (a tracker chosen for every medium)";
         }
         match self {
             Tracker::Analytic => "auto: homogeneous and grey, so free paths have a closed form",
@@ -122,16 +121,6 @@ impl TrackerChoice {
                 t.check(medium).map(|()| *t).map_err(TrackerError::Inapplicable)
             }
         }
-    }
-}
-
-impl Scene {
-    /// Re-chooses every medium's tracker; an error (and no change) if a forced tracker cannot
-    /// apply to some medium.
-    pub fn set_tracker(&mut self, choice: TrackerChoice) -> Result<(), TrackerError> {
-        let trackers = self.media.iter().map(|m| choice.pick(m)).collect::<Result<Vec<_>, _>>()?;
-        self.trackers = trackers;
-        Ok(())
     }
 }
 

@@ -1,4 +1,5 @@
-//! Statistical test helpers shared by zerovar's crates.
+//! Statistical test helpers shared by zerovar's crates (and, in [`files`], the repository's
+//! files and a scratch directory for integration tests).
 //!
 //! Every sampler in zerovar is checked the same way: samples are binned and compared with the
 //! counts its own pdf predicts (a chi-square goodness-of-fit test), the pdf is integrated by
@@ -10,6 +11,7 @@
 //! handled by a graded polar grid about a chosen axis: bin edges are uniform in
 //! `theta / (theta + theta_scale)`, so bins are fine inside the lobe and coarse outside.
 
+pub mod files;
 mod quadrature;
 mod special;
 

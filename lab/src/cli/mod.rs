@@ -1,21 +1,21 @@
 //! Command-line arguments (clap), their validation into a `Command`, and running it.
 
 mod crop;
+mod paths;
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
 use crop::{crops, noisiest_window, parse_crop};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+use paths::check_outputs;
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
+use zerovar::guided::Components;
 use zerovar::guided::TrainedField;
 use zerovar::output::{ImageMetadata, write_exr, write_png};
-use zerovar::render::{
-    Budget, GuidingOptions, RenderOptions, TrainBudget, render, render_with_field,
-};
-use zerovar::render::{DEFAULT_TRAIN_SHARE, MAX_TRAIN_PASSES, parse_guiding};
-use zerovar::render::{RenderStats, TrainingStats};
+use zerovar::render::{Budget, GuidingOptions, RenderOptions, render, render_with_field};
+use zerovar::render::{RenderStats, SETTINGS, Setting, TRAIN_BUDGET, TrainingStats};
 
 #[derive(Parser)]
 #[command(
@@ -81,9 +81,10 @@ struct CompareArgs {
     reference: PathBuf,
     #[command(flatten)]
     budget: BudgetArgs,
-    /// A method: NAME=key:value,... with keys guiding, alpha, surface-alpha, distance-alpha,
-    /// train-share, train-passes, train-time, tracker, combine, parallax (repeatable)
-    /// [default: unguided, guided=guiding:full and auto=guiding:auto].
+    /// A method: NAME=key:value,... with the guiding flags as keys (guiding, alpha,
+    /// surface-alpha, distance-alpha, train-share, train-passes, train-time, training-images,
+    /// parallax) and tracker (repeatable) [default: unguided, guided=guiding:full and
+    /// auto=guiding:auto].
     #[arg(long, value_name = "NAME=OPTIONS")]
     method: Vec<String>,
     /// Directory for the tables and images.
@@ -108,52 +109,64 @@ struct CompareArgs {
     threads: Option<usize>,
 }
 
-#[derive(Args)]
-struct GuidingArgs {
-    /// Guided decisions: off, directions, distances, rr, full, or a +-joined list
-    /// (e.g. directions+rr); auto is full guiding (or roulette alone, where that pays
-    /// better) in the tiles where a pilot finds it pays, and unguided sampling elsewhere
-    /// [default: auto; full for `train` and with --field].
-    #[arg(long, value_name = "MODE")]
-    guiding: Option<String>,
-    /// Probability of the guided strategy in each mixture with standard sampling in media, in
-    /// [0, 1] (used up to 0.8: standard sampling always keeps 20%, which bounds every weight).
-    #[arg(long, default_value_t = 0.5)]
-    alpha: f32,
-    /// The same at surfaces, in [0, 1] (used up to 0.8).
-    #[arg(long, default_value_t = zerovar::render::DEFAULT_SURFACE_ALPHA)]
-    surface_alpha: f32,
-    /// Probability of the zero-variance collision density in guided flights' mixture with
-    /// standard tracking, in [0, 1] (used up to 0.8). Guided flights take extra collisions for
-    /// delta lights whatever it is; the default 0 spares each flight a field lookup, which at
-    /// equal time paid better on every bench scene.
-    #[arg(long, default_value_t = zerovar::render::DEFAULT_DISTANCE_ALPHA)]
-    distance_alpha: f32,
-    /// Share of the budget (--time or --spp) that training takes, in (0, 1): doubling passes
-    /// of 1, 2, 4, ... samples per pixel while the next fits in it; the render gets the rest
-    /// [default: 0.25].
-    #[arg(long, allow_negative_numbers = true, conflicts_with_all = ["train_passes", "train_time"])]
-    train_share: Option<f64>,
-    /// Train this many passes instead (with --spp, the render then renders all of it).
-    #[arg(long, conflicts_with = "train_time")]
-    train_passes: Option<u32>,
-    /// Train for this many seconds instead (doubling passes; --time still includes them).
-    #[arg(long, allow_negative_numbers = true)]
-    train_time: Option<f64>,
-    /// Parallax-aware lobes: each learns how far its light comes from and is re-aimed at it
-    /// from every point of its region (on), or fixed directions per region (off, for
-    /// comparison) [default: on].
-    #[arg(long, value_enum, value_name = "ON|OFF")]
-    parallax: Option<Switch>,
+/// The guiding settings as flags, one per entry of `zerovar::render::SETTINGS` (for `train`,
+/// only those that concern training), kept as given: the library parses and checks them, so
+/// they take the same values and meet the same rules as `compare`'s method keys.
+#[derive(Clone, Debug, Default)]
+struct GuidingArgs<const TRAIN: bool> {
+    given: Vec<(&'static str, String)>,
 }
 
-/// A setting that is on or off.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum Switch {
-    /// On.
-    On,
-    /// Off.
-    Off,
+impl<const TRAIN: bool> GuidingArgs<TRAIN> {
+    fn settings() -> impl Iterator<Item = &'static Setting> {
+        SETTINGS.iter().filter(|s| s.trains || !TRAIN)
+    }
+
+    fn given(&self, key: &str) -> Option<&str> {
+        self.given.iter().find(|(k, _)| *k == key).map(|(_, v)| v.as_str())
+    }
+
+    /// The settings applied over `base`; errors name the flag.
+    fn apply(&self, mut base: GuidingOptions) -> Result<GuidingOptions> {
+        base.apply(self.given.iter().map(|(k, v)| (*k, v.as_str())))
+            .map_err(|e| anyhow::anyhow!("--{e}"))?;
+        Ok(base)
+    }
+}
+
+impl<const TRAIN: bool> clap::FromArgMatches for GuidingArgs<TRAIN> {
+    fn from_arg_matches(m: &clap::ArgMatches) -> Result<Self, clap::Error> {
+        let given = Self::settings()
+            .filter_map(|s| m.get_one::<String>(s.key).map(|v| (s.key, v.clone())))
+            .collect();
+        Ok(Self { given })
+    }
+
+    fn update_from_arg_matches(&mut self, m: &clap::ArgMatches) -> Result<(), clap::Error> {
+        *self = Self::from_arg_matches(m)?;
+        Ok(())
+    }
+}
+
+impl<const TRAIN: bool> Args for GuidingArgs<TRAIN> {
+    fn augment_args(cmd: clap::Command) -> clap::Command {
+        Self::settings().fold(cmd, |cmd, s| {
+            let others =
+                TRAIN_BUDGET.iter().filter(|k| TRAIN_BUDGET.contains(&s.key) && **k != s.key);
+            cmd.arg(
+                clap::Arg::new(s.key)
+                    .long(s.key)
+                    .value_name(s.value)
+                    .help(s.help)
+                    .allow_negative_numbers(true)
+                    .conflicts_with_all(others.copied()),
+            )
+        })
+    }
+
+    fn augment_args_for_update(cmd: clap::Command) -> clap::Command {
+        Self::augment_args(cmd)
+    }
 }
 
 #[derive(Args)]
@@ -168,7 +181,7 @@ struct TrainArgs {
     #[command(flatten)]
     budget: BudgetArgs,
     #[command(flatten)]
-    guiding: GuidingArgs,
+    guiding: GuidingArgs<true>,
     /// Seed of the random streams [default: the scene's render.seed].
     #[arg(long)]
     seed: Option<u64>,
@@ -230,7 +243,7 @@ struct RenderArgs {
     #[arg(short, long)]
     quiet: bool,
     #[command(flatten)]
-    guiding: GuidingArgs,
+    guiding: GuidingArgs<false>,
     /// Render guided by a field saved by `zerovar train` (no training phase).
     #[arg(long, value_name = "FIELD")]
     field: Option<PathBuf>,
@@ -238,19 +251,6 @@ struct RenderArgs {
     /// table on stderr, and every decision of each path in --stats.
     #[arg(long, value_name = "N", default_value_t = 0)]
     fireflies: usize,
-    /// What becomes of the training passes' images: combine (averaged into the result by
-    /// inverse variance) or discard.
-    #[arg(long, value_enum, default_value_t = TrainingImages::Combine, value_name = "WHAT")]
-    training_images: TrainingImages,
-}
-
-/// What `render` does with the training passes' images.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
-enum TrainingImages {
-    /// Average them into the result, one weight per image by its inverse relative variance.
-    Combine,
-    /// Drop them: the result is the render phase's samples alone.
-    Discard,
 }
 
 /// A fully validated render request.
@@ -277,7 +277,7 @@ pub(crate) fn run() -> Result<()> {
         CommandArgs::Check(a) => {
             let defines = parse_defines(&a.scene.define)?;
             let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
-            scene.set_tracker(a.scene.tracker)?;
+            scene.set_tracker(a.scene.tracker).map_err(|e| anyhow::anyhow!("--{e}"))?;
             print!("{}", scene.describe());
             Ok(())
         }
@@ -293,7 +293,7 @@ fn validate_budget(b: &BudgetArgs, default_spp: u32) -> Result<Budget> {
         (Some(0), _) => bail!("--spp 0: give at least one sample per pixel"),
         (Some(n), _) => Ok(Budget::Samples(n)),
         (None, Some(t)) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
-            bail!("--time {t}: give a positive number of seconds")
+            bail!("--time {t}: give a positive number of seconds below 1e7 (about 16 weeks)")
         }
         (None, Some(t)) => Ok(Budget::Time(Duration::from_secs_f64(t))),
         (None, None) => Ok(Budget::Samples(default_spp)),
@@ -309,10 +309,18 @@ fn run_reference(a: ReferenceArgs) -> Result<()> {
     {
         bail!("-o {}: the reference must be an .exr file", a.output.display());
     }
+    check_outputs(&[("the scene", &a.scene.scene)], &[("-o", &a.output)])?;
     let defines = parse_defines(&a.scene.define)?;
     let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
-    scene.set_tracker(a.scene.tracker)?;
-    let budget = validate_budget(&a.budget, scene.settings().spp * 16)?;
+    scene.set_tracker(a.scene.tracker).map_err(|e| anyhow::anyhow!("--{e}"))?;
+    let Some(default_spp) = scene.settings().spp.checked_mul(16) else {
+        bail!(
+            "{}: a reference renders 16 times the scene's {} spp, more than can be counted; give --spp or --time",
+            a.scene.scene.display(),
+            scene.settings().spp
+        );
+    };
+    let budget = validate_budget(&a.budget, default_spp)?;
     let seed = a.seed.unwrap_or(scene.settings().seed.wrapping_add(1_000_003));
     let options = RenderOptions { threads: a.threads, ..RenderOptions::unguided(budget, seed) };
     let bar = progress_bar(!a.quiet && std::io::stderr().is_terminal());
@@ -369,6 +377,29 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     if let Some(m) = methods.iter().find(|m| !names.insert(m.name.clone())) {
         bail!("--method {}: two methods have this name", m.name);
     }
+    let mut files: Vec<String> = [
+        "results.md",
+        "results.csv",
+        "results.json",
+        "convergence.png",
+        "convergence.svg",
+        "strip.png",
+        "crops.png",
+    ]
+    .map(String::from)
+    .into();
+    for m in &methods {
+        files.extend(["exr", "png"].map(|e| format!("{}.{e}", m.name)));
+        files.push(format!("{}-error.png", m.name));
+    }
+    let paths: Vec<PathBuf> = files.iter().map(|f| a.out.join(f)).collect();
+    let labels: Vec<String> = files.iter().map(|f| format!("the {f} of --out")).collect();
+    let outputs: Vec<(&str, &Path)> =
+        labels.iter().zip(&paths).map(|(l, p)| (l.as_str(), p.as_path())).collect();
+    check_outputs(
+        &[("the scene", &a.scene.scene), ("the reference of --reference", &a.reference)],
+        &outputs,
+    )?;
     let (rw, rh, reference, reference_error) = zerovar::output::read_exr_with_error(&a.reference)?;
     let [w, h] = scene.camera().resolution();
     if (rw, rh) != (w as usize, h as usize) {
@@ -464,68 +495,35 @@ fn side_by_side(
 
 /// Validates guiding arguments. `field_use` names what needs a field (`train`, or rendering
 /// with `--field`): there guiding defaults to full, and `off` is an error.
-fn validate_guiding(a: &GuidingArgs, field_use: Option<&str>) -> Result<GuidingOptions> {
-    let text = a.guiding.as_deref().unwrap_or(if field_use.is_some() { "full" } else { "auto" });
-    let Some((components, adaptive)) = parse_guiding(text) else {
-        bail!(
-            "--guiding {text}: use off, directions, distances, rr, full, auto, or a +-joined list"
-        );
+fn validate_guiding<const TRAIN: bool>(
+    a: &GuidingArgs<TRAIN>,
+    field_use: Option<&str>,
+) -> Result<GuidingOptions> {
+    let base = match field_use {
+        Some(_) => GuidingOptions { components: Components::FULL, ..GuidingOptions::default() },
+        None => GuidingOptions::auto(),
     };
+    let options = a.apply(base)?;
     if let Some(what) = field_use
-        && !components.any()
+        && !options.components.any()
     {
         bail!(
-            "--guiding {text}: {what} needs something guided; give full (the default there), directions, distances, rr or a +-joined list"
+            "--guiding {}: {what} needs something guided; give full (the default there), directions, distances, rr or a +-joined list",
+            a.given("guiding").unwrap_or("off")
         );
     }
-    if !(0.0..=1.0).contains(&a.alpha) {
-        bail!("--alpha {}: give a probability in [0, 1]", a.alpha);
-    }
-    if !(0.0..=1.0).contains(&a.surface_alpha) {
-        bail!("--surface-alpha {}: give a probability in [0, 1]", a.surface_alpha);
-    }
-    if !(0.0..=1.0).contains(&a.distance_alpha) {
-        bail!("--distance-alpha {}: give a probability in [0, 1]", a.distance_alpha);
-    }
-    let train = match (a.train_time, a.train_passes, a.train_share) {
-        (Some(t), _, _) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
-            bail!("--train-time {t}: give a positive number of seconds")
-        }
-        (Some(t), _, _) => TrainBudget::Time(Duration::from_secs_f64(t)),
-        (None, Some(n), _) if n == 0 || n > MAX_TRAIN_PASSES => {
-            bail!("--train-passes {n}: give 1 to 20 passes (pass k renders 2^k spp)")
-        }
-        (None, Some(n), _) => TrainBudget::Passes(n),
-        (None, None, Some(f)) if !(f > 0.0 && f < 1.0) => {
-            bail!("--train-share {f}: give a fraction of the budget above 0 and below 1")
-        }
-        (None, None, Some(f)) => TrainBudget::Share(f as f32),
-        (None, None, None) => TrainBudget::Share(DEFAULT_TRAIN_SHARE),
-    };
-    let mut field = GuidingOptions::default().field;
-    if let Some(p) = a.parallax {
-        field.parallax = p == Switch::On;
-    }
-    Ok(GuidingOptions {
-        components,
-        alpha: a.alpha,
-        surface_alpha: a.surface_alpha,
-        distance_alpha: a.distance_alpha,
-        train,
-        adaptive,
-        field,
-        ..GuidingOptions::default()
-    })
+    Ok(options)
 }
 
 fn run_train(a: TrainArgs) -> Result<()> {
     let guiding = validate_guiding(&a.guiding, Some("training a field"))?;
+    check_outputs(&[("the scene", &a.scene.scene)], &[("-o", &a.output)])?;
     if a.threads == Some(0) {
         bail!("--threads 0: give at least one thread, or leave it out to use every core");
     }
     let defines = parse_defines(&a.scene.define)?;
     let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
-    scene.set_tracker(a.scene.tracker)?;
+    scene.set_tracker(a.scene.tracker).map_err(|e| anyhow::anyhow!("--{e}"))?;
     let seed = a.seed.unwrap_or(scene.settings().seed);
     let options = RenderOptions {
         budget: validate_budget(&a.budget, scene.settings().spp)?,
@@ -579,7 +577,7 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
     }
     let time = match a.time {
         Some(t) if !(t > 0.0 && t.is_finite() && t < 1e7) => {
-            bail!("--time {t}: give a positive number of seconds")
+            bail!("--time {t}: give a positive number of seconds below 1e7 (about 16 weeks)")
         }
         Some(t) => Some(Duration::from_secs_f64(t)),
         None => None,
@@ -587,8 +585,8 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
     if a.threads == Some(0) {
         bail!("--threads 0: give at least one thread, or leave it out to use every core");
     }
-    if !a.exposure.is_finite() {
-        bail!("--exposure {}: give a finite number of stops", a.exposure);
+    if !(-64.0..=64.0).contains(&a.exposure) {
+        bail!("--exposure {}: give a number of stops from -64 to 64", a.exposure);
     }
     let output = a.output.unwrap_or_else(|| {
         let stem = a.scene.scene.file_stem().unwrap_or_else(|| "render".as_ref());
@@ -609,24 +607,28 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
     }
     let guiding =
         validate_guiding(&a.guiding, a.field.is_some().then_some("rendering with --field"))?;
-    if a.field.is_some() && a.guiding.parallax.is_some() {
+    if a.field.is_some() && a.guiding.given("parallax").is_some() {
         bail!(
             "--parallax: a saved field keeps the setting it was trained with; give --parallax to `zerovar train`"
         );
     }
-    let combine_training = a.training_images == TrainingImages::Combine;
-    let guiding = GuidingOptions { combine_training, ..guiding };
     if let Some(f) = &a.field
         && !f.is_file()
     {
         bail!("--field {}: no such file; create one with `zerovar train`", f.display());
     }
+    let png = output.with_extension("png");
+    let mut inputs = vec![("the scene", a.scene.scene.as_path())];
+    inputs.extend(a.field.as_deref().map(|f| ("the field of --field", f)));
+    let mut outputs = vec![("-o", output.as_path()), ("the PNG preview of -o", png.as_path())];
+    outputs.extend(a.stats.as_deref().map(|s| ("--stats", s)));
+    check_outputs(&inputs, &outputs)?;
     Ok(RenderCommand {
         guiding,
         field: a.field,
         scene: a.scene.scene,
         defines,
-        png: output.with_extension("png"),
+        png,
         output,
         spp: a.spp,
         time,
@@ -642,7 +644,7 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
 
 fn run_render(c: RenderCommand) -> Result<()> {
     let mut scene = zerovar::scene::load(&c.scene, &c.defines)?;
-    scene.set_tracker(c.tracker)?;
+    scene.set_tracker(c.tracker).map_err(|e| anyhow::anyhow!("--{e}"))?;
     let budget = match (c.time, c.spp) {
         (Some(t), _) => Budget::Time(t),
         (None, Some(n)) => Budget::Samples(n),

@@ -408,7 +408,7 @@ impl Reader<'_> {
         let dir = pos.path.parent().unwrap_or(Path::new(""));
         let file =
             resolve(&name, dir, &self.search, &self.root_dir).unwrap_or_else(|| dir.join(&name));
-        let text = std::fs::read_to_string(&file).map_err(|e| {
+        let text = crate::files::read_to_string(&file).map_err(|e| {
             pos.err(format!("<include filename=\"{name}\">: cannot read {}: {e}", file.display()))
         })?;
         let key = file.canonicalize().unwrap_or_else(|_| file.clone());
