@@ -454,7 +454,11 @@ fn reference_and_compare_end_to_end() {
         "--method",
         "x=speed:11",
     ]);
-    assert!(!o.status.success() && stderr(&o).contains("unknown setting `speed`"), "{}", stderr(&o));
+    assert!(
+        !o.status.success() && stderr(&o).contains("unknown setting `speed`"),
+        "{}",
+        stderr(&o)
+    );
     assert!(!stderr(&o).contains("panicked"));
 }
 

@@ -168,10 +168,10 @@ pub fn render(
 
 /// The fewest samples per pixel of a sample budget that adaptive guiding shares with its
 /// training and pilot: below it they would take most of the budget (the first pass, and a
-/// pilot of at least 2 spp per candidate, are whole samples), so the render is unguided.
+/// pilot of at least 4 spp per candidate, are whole samples), so the render is unguided.
 pub const MIN_ADAPTIVE_SPP: u32 = 16;
 
-/// The early look's modelled gain, guiding every tile, from which adaptive guiding skips its
+/// The early look's validated gain, guiding every tile, from which adaptive guiding skips its
 /// pilot after training and guides every tile with the early look's candidate: the field only
 /// improves with training, and where a field of 3 spp already halves the work of an image, the
 /// pilot (a tenth of the budget or more) could only confirm it. Twice, as much as a partial
@@ -180,7 +180,7 @@ const DECISIVE_GAIN: f64 = 2.0;
 
 /// Whether the early look settles adaptive guiding's choice (see [`DECISIVE_GAIN`]).
 fn decisive(early: &Selection) -> bool {
-    early.guided_tiles == early.tiles && early.everywhere_gain >= DECISIVE_GAIN
+    early.guided_tiles == early.tiles && early.validated_gain >= DECISIVE_GAIN
 }
 
 /// The render phase guiding every tile with the early look's candidate, without a pilot.
@@ -208,11 +208,11 @@ fn guided_everywhere(
 /// Training passes after which adaptive guiding first pilots the field (1 + 2 spp).
 const EARLY_PILOT_PASSES: u32 = 2;
 
-/// Least modelled gain of the early pilot's choice for training to go on. A 2-spp pilot's
-/// best choice of tiles gains a few percent by noise alone (it picks the tiles whose samples
-/// happened to look better), and where guiding pays, a field of 3 spp already gains far more
-/// than a tenth (see docs/experiments.md); below it, the rest of training's share renders
-/// unguided.
+/// Least validated gain (out of sample, `Selection::validated_gain`) of the early pilot's
+/// choice for training to go on; below it, the rest of training's share renders unguided.
+/// Training takes a quarter of the budget, so a field that gains less than a tenth after 3
+/// spp is not worth it; where guiding pays, the early look gains far more (see
+/// docs/experiments.md).
 const EARLY_MIN_GAIN: f64 = 1.1;
 
 /// Adaptive guiding's early look: after a short training, a pilot judges whether guiding
@@ -231,8 +231,8 @@ fn early_pilot(
     }
     let guidance = training.guidance();
     let last_pass = 1 << (EARLY_PILOT_PASSES - 1);
-    let selection = select::pilot(scene, options, &guidance, last_pass, 2, progress)?.selection;
-    if selection.gain >= EARLY_MIN_GAIN {
+    let selection = select::pilot(scene, options, &guidance, last_pass, 4, progress)?.selection;
+    if selection.validated_gain >= EARLY_MIN_GAIN {
         training.seconds += selection.seconds;
         training.early = Some(selection);
         return None;

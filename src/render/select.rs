@@ -50,7 +50,7 @@ pub struct Selection {
     pub guided_tiles: usize,
     /// What the guided tiles guide (`full`, or `rr` where roulette alone pays better).
     pub components: String,
-    /// Each candidate's components and the modelled gain of its best choice of tiles.
+    /// Each candidate's components and the validated gain of its best choice of tiles.
     pub candidates: Vec<(String, f64)>,
     /// Samples per pixel of each pilot (guided and unguided).
     pub pilot_spp: u32,
@@ -67,6 +67,11 @@ pub struct Selection {
     /// Modelled gain of guiding every tile with the chosen components (the choice guides
     /// every tile unless leaving some out gains `PARTIAL_MARGIN` times more).
     pub everywhere_gain: f64,
+    /// The gain out of sample: each half of the pilot's samples chooses tiles, the other half
+    /// judges the choice (the geometric mean of both ways). Unlike `gain`, the noise a choice
+    /// was made from does not inflate it; it decides, and where it is not above 1 nothing is
+    /// guided.
+    pub validated_gain: f64,
     /// Whether this pilot ran early in training and found too little `gain` to go on: the
     /// rest of the training budget was rendered unguided.
     pub stopped_training: bool,
@@ -120,9 +125,9 @@ pub(super) const MIN_TILE_PILOT_SPP: u32 = 8;
 
 /// Runs the pilot with `guidance`'s field; returns which tiles to guide and how, or `None`
 /// when the render was cancelled. `last_pass` is the spp of the last training pass, which
-/// sizes it: a quarter of it, from `min_spp` (2, the fewest that give a variance, for the
-/// early look that only decides whether training goes on; [`MIN_TILE_PILOT_SPP`] for the
-/// choice of tiles) to 16.
+/// sizes it: a quarter of it, from `min_spp` (4, the fewest that give each half of the
+/// samples a variance, for the early look that only decides whether training goes on;
+/// [`MIN_TILE_PILOT_SPP`] for the choice of tiles) to 16.
 pub(super) fn pilot(
     scene: &Scene,
     options: &RenderOptions,
@@ -134,25 +139,27 @@ pub(super) fn pilot(
     let start = Instant::now();
     let [w, h] = scene.camera.resolution();
     // Never more than a quarter of a sample budget (nor fewer than 2).
-    let mut count = (last_pass / 4).clamp(min_spp.max(2), 16);
+    let mut count = (last_pass / 4).clamp(min_spp.max(4), 16);
     if let Budget::Samples(spp) = options.budget {
-        count = count.min((spp / 4).max(2));
+        count = count.min((spp / 4).max(4));
     }
     let settings = walk_settings(scene, options);
     let strategies = candidates(settings.guide);
     let total = (1 + strategies.len() as u64) * u64::from(count) * u64::from(w) * u64::from(h);
     let done = AtomicU64::new(0);
     let report = |n: u64| monitor.report(done.fetch_add(n, Ordering::Relaxed) + n, total);
-    // Strategy 0 is unguided sampling, k > 0 candidate k - 1.
-    let run = |k: usize, guide: Components| {
+    // Strategy 0 is unguided sampling, k > 0 candidate k - 1. Each renders its samples in two
+    // halves: a choice of tiles made on one half is judged on the other.
+    let half = count / 2;
+    let run = |k: usize, guide: Components, part: u32| {
         let settings = WalkSettings { guide, ..settings };
         let mut film = Film::new(w, h);
         let pass = Pass {
             settings: &settings,
             // Streams of their own, independent of training's and the image's.
             seed: mix64(options.seed ^ (0x7069_6C6F_7400 + k as u64)),
-            first: 0,
-            count,
+            first: part * half,
+            count: if part == 0 { half } else { count - half },
             field: (k > 0).then_some((guidance.field, guidance.direct)),
             estimate: guidance.estimate.as_deref(),
             record: false,
@@ -161,10 +168,11 @@ pub(super) fn pilot(
         };
         render_pass(scene, pass, &mut film, monitor, &report).map(|o| (film, o.tile_counters))
     };
-    let (unguided, unguided_cost) = run(0, Components::OFF)?;
+    let halves = |k: usize, guide: Components| Some([run(k, guide, 0)?, run(k, guide, 1)?]);
+    let unguided = halves(0, Components::OFF)?;
     let mut guided = Vec::with_capacity(strategies.len());
     for (k, &c) in strategies.iter().enumerate() {
-        guided.push(run(k + 1, c)?);
+        guided.push(halves(k + 1, c)?);
     }
     // Relative variance needs each pixel's value, and a pilot's own mean is no good for it: an
     // outlier inflates the mean it is divided by. The training images' (blurred) estimates
@@ -173,54 +181,86 @@ pub(super) fn pilot(
     let estimate = match &guidance.estimate {
         Some(e) => e,
         None => {
-            own = pixel_estimates(std::slice::from_ref(&guided[0].0)).expect("one film");
+            own = pixel_estimates(&guided[0].clone().map(|(film, _)| film)).expect("two films");
             &own
         }
     };
-    let tile_list = tiles(w, h);
     let columns = w.div_ceil(TILE) as usize;
-    // Each candidate's best set of tiles; the candidate whose set gains most wins (ties go to
-    // the earlier, the requested components).
+    // Each candidate's best set of tiles; the candidate whose set gains most out of sample
+    // wins (ties go to the earlier, the requested components).
     let mut best: Option<Choice> = None;
     let mut gains = Vec::with_capacity(strategies.len());
-    for ((film, costs), &components) in guided.iter().zip(&strategies) {
-        let measured: Vec<TileMeasure> = tile_list
-            .iter()
-            .enumerate()
-            .map(|(i, &(tx, ty))| {
-                let (x0, y0) = (tx * TILE, ty * TILE);
-                let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
-                let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (y * w + x) as usize));
-                let (mut guided_variance, mut unguided_variance) = (0.0, 0.0);
-                for p in pixels {
-                    // relMSE's weight, on luminance rather than per channel.
-                    let weight = 1.0 / (f64::from(estimate[p]).powi(2) + EPSILON);
-                    guided_variance += weight * film.pixels[p].luminance_variance();
-                    unguided_variance += weight * unguided.pixels[p].luminance_variance();
-                }
-                TileMeasure {
-                    guided_variance,
-                    unguided_variance,
-                    guided_cost: cost(&costs[i]),
-                    unguided_cost: cost(&unguided_cost[i]),
-                }
-            })
-            .collect();
-        let choice = everywhere_unless_clearly_worse(
-            &measured,
-            choose(&measured, &smoothed(&measured, columns)),
-        );
-        let mut selection = summarise(&measured, &choice, components, count);
-        selection.everywhere_gain = gain(&measured, &vec![true; measured.len()]);
-        gains.push((components.name(), selection.gain));
-        if best.as_ref().is_none_or(|b| selection.gain > b.selection.gain) {
+    for (pilot, &components) in guided.iter().zip(&strategies) {
+        let parts = [0, 1].map(|i| measure(&pilot[i], &unguided[i], estimate, w, h));
+        let all: Vec<TileMeasure> = parts[0].iter().zip(&parts[1]).map(|(a, b)| *a + *b).collect();
+        let choice = decide(&all, columns);
+        let mut selection = summarise(&all, &choice, components, count);
+        selection.everywhere_gain = gain(&all, &vec![true; all.len()]);
+        selection.validated_gain = validated_gain(&parts, columns);
+        gains.push((components.name(), selection.validated_gain));
+        if best.as_ref().is_none_or(|b| selection.validated_gain > b.selection.validated_gain) {
             best = Some(Choice { tiles: choice, components, selection });
         }
     }
     let mut best = best.expect("at least the requested components");
+    let pays = best.selection.validated_gain > 1.0;
+    if !pays {
+        // No choice of tiles pays out of sample: the pilot cannot tell guiding from noise.
+        best.tiles.iter_mut().for_each(|g| *g = false);
+        (best.selection.guided_tiles, best.selection.gain) = (0, 1.0);
+    }
     best.selection.seconds = start.elapsed().as_secs_f64();
     best.selection.candidates = gains;
     Some(best)
+}
+
+/// The tiles to guide by one pilot's measures (`columns` tiles per row): the best set
+/// ([`choose`], on pooled measures), or every tile unless that is clearly worse.
+fn decide(measured: &[TileMeasure], columns: usize) -> Vec<bool> {
+    everywhere_unless_clearly_worse(measured, choose(measured, &smoothed(measured, columns)))
+}
+
+/// The gain of [`decide`]'s choice out of sample: the choice made on each half of the pilot's
+/// samples, judged on the other, as the geometric mean of both ways. A choice judged on the
+/// samples it was made from looks better than it is (it picks the tiles whose samples happened
+/// to look better); judged on independent ones it does not.
+fn validated_gain(parts: &[Vec<TileMeasure>; 2], columns: usize) -> f64 {
+    let one_way =
+        |made: &[TileMeasure], judged: &[TileMeasure]| gain(judged, &decide(made, columns));
+    (one_way(&parts[0], &parts[1]) * one_way(&parts[1], &parts[0])).sqrt()
+}
+
+/// Each tile's measures from one half of the pilot: a guided strategy's film and per-tile
+/// counters, and unguided sampling's, each pixel weighted as relMSE weighs it (`estimate`).
+fn measure(
+    guided: &(Film, Vec<Counters>),
+    unguided: &(Film, Vec<Counters>),
+    estimate: &[f32],
+    w: u32,
+    h: u32,
+) -> Vec<TileMeasure> {
+    tiles(w, h)
+        .iter()
+        .enumerate()
+        .map(|(i, &(tx, ty))| {
+            let (x0, y0) = (tx * TILE, ty * TILE);
+            let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
+            let pixels = (y0..y1).flat_map(|y| (x0..x1).map(move |x| (y * w + x) as usize));
+            let (mut guided_variance, mut unguided_variance) = (0.0, 0.0);
+            for p in pixels {
+                // relMSE's weight, on luminance rather than per channel.
+                let weight = 1.0 / (f64::from(estimate[p]).powi(2) + EPSILON);
+                guided_variance += weight * guided.0.pixels[p].luminance_variance();
+                unguided_variance += weight * unguided.0.pixels[p].luminance_variance();
+            }
+            TileMeasure {
+                guided_variance,
+                unguided_variance,
+                guided_cost: cost(&guided.1[i]),
+                unguided_cost: cost(&unguided.1[i]),
+            }
+        })
+        .collect()
 }
 
 /// The report of one candidate's choice of tiles.
@@ -249,6 +289,7 @@ fn summarise(
         variance_ratio: ratio(sums[0], sums[1]),
         gain: gain(measured, choice),
         everywhere_gain: f64::NAN,
+        validated_gain: f64::NAN,
         stopped_training: false,
         early: None,
         decided_early: false,
@@ -299,6 +340,19 @@ struct TileMeasure {
     unguided_cost: f64,
 }
 
+impl std::ops::Add for TileMeasure {
+    type Output = Self;
+
+    fn add(self, o: Self) -> Self {
+        Self {
+            guided_variance: self.guided_variance + o.guided_variance,
+            unguided_variance: self.unguided_variance + o.unguided_variance,
+            guided_cost: self.guided_cost + o.guided_cost,
+            unguided_cost: self.unguided_cost + o.unguided_cost,
+        }
+    }
+}
+
 /// How much more a choice that leaves some tiles unguided must gain than guiding every tile:
 /// the best-looking choice is picked under the pilot's noise, and where unguided samples are
 /// heavy-tailed, the tiles a smaller margin left out drew fireflies (see docs/experiments.md).
@@ -319,11 +373,8 @@ fn smoothed(tiles: &[TileMeasure], columns: usize) -> Vec<TileMeasure> {
             let mut sum = TileMeasure::default();
             for ny in y.saturating_sub(POOL_RADIUS)..(y + POOL_RADIUS + 1).min(rows) {
                 for nx in x.saturating_sub(POOL_RADIUS)..(x + POOL_RADIUS + 1).min(columns) {
-                    if let Some(m) = tiles.get(ny * columns + nx) {
-                        sum.guided_variance += m.guided_variance;
-                        sum.unguided_variance += m.unguided_variance;
-                        sum.guided_cost += m.guided_cost;
-                        sum.unguided_cost += m.unguided_cost;
+                    if let Some(&m) = tiles.get(ny * columns + nx) {
+                        sum = sum + m;
                     }
                 }
             }
@@ -400,6 +451,27 @@ mod tests {
             .map(|(m, &g)| pick(m, g))
             .fold((0.0, 0.0), |(v, c), (dv, dc)| (v + dv, c + dc));
         v * c
+    }
+
+    /// Where one half of the pilot favours guiding a tile and the other half the opposite,
+    /// the choice looks good on the half it was made from and the validated gain says it is
+    /// not; where both halves favour guiding, the validated gain says so.
+    #[test]
+    fn the_validated_gain_sees_through_a_choice_made_on_noise() {
+        let plain = |n: usize| vec![tile(1.0, 1.0, 1.2); n];
+        // Twelve tiles in a row; pooling spans five, so tiles 0 and 11 are judged apart.
+        let mut a = plain(12);
+        let mut b = plain(12);
+        a[0] = tile(0.1, 4.0, 1.2); // half a: guiding tile 0 looks 40x better
+        b[0] = tile(4.0, 1.0, 1.2); // half b: 4x worse
+        let made_on_a = decide(&a, 12);
+        assert!(made_on_a[0] && gain(&a, &made_on_a) > 1.1, "{made_on_a:?}");
+        let noise = validated_gain(&[a.clone(), b.clone()], 12);
+        assert!(noise < 1.0, "validated gain {noise}");
+        // Both halves: guiding halves the variance everywhere at 1.2x the cost.
+        let good = vec![tile(0.5, 1.0, 1.2); 12];
+        let real = validated_gain(&[good.clone(), good], 12);
+        assert!((real - 1.0 / 0.6).abs() < 1e-9, "validated gain {real}");
     }
 
     #[test]

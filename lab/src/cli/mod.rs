@@ -748,19 +748,19 @@ fn tell(
         if sel.stopped_training {
             eprintln!(
                 "{name}: adaptive guiding found no tile worth guiding after {} training passes \
-                 (modelled gain {:.2}): rendered unguided",
+                 (validated gain {:.2}): rendered unguided",
                 result.training.as_ref().map_or(0, |t| t.passes),
-                sel.gain
+                sel.validated_gain
             );
         } else if sel.decided_early {
             eprintln!(
-                "{name}: adaptive guiding guided every tile with {} (decided after 2 training passes: modelled gain {:.2})",
-                sel.components, sel.gain
+                "{name}: adaptive guiding guided every tile with {} (decided after 2 training passes: validated gain {:.2})",
+                sel.components, sel.validated_gain
             );
         } else {
             eprintln!(
-                "{name}: adaptive guiding guided {} of {} tiles with {} (modelled gain {:.2})",
-                sel.guided_tiles, sel.tiles, sel.components, sel.gain
+                "{name}: adaptive guiding guided {} of {} tiles with {} (validated gain {:.2})",
+                sel.guided_tiles, sel.tiles, sel.components, sel.validated_gain
             );
         }
     }
