@@ -23,6 +23,33 @@ use std::path::{Path, PathBuf};
 /// (training passes, the render phase), so 2^25 pixels stay within a few gigabytes.
 const MAX_PIXELS: u64 = 1 << 25;
 
+/// The camera, its placement and resolution checked.
+fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
+    cx.finite(
+        "camera origin, target and up",
+        &[cam.origin, cam.target, cam.up].map(|v| v.to_array()).concat(),
+    )?;
+    let Some(to_world) = Transform::look_at(cam.origin, cam.target, cam.up) else {
+        return cx.err("origin equals target, or up is parallel to the view direction");
+    };
+    if !(cam.fov > 0.0 && cam.fov < 180.0) {
+        return cx.err(format!("fov {} must lie strictly between 0 and 180 degrees", cam.fov));
+    }
+    if cam.resolution.contains(&0) || cam.resolution.iter().any(|&r| r > 1 << 15) {
+        return cx
+            .err(format!("resolution {:?} must be between 1 and 32768 per axis", cam.resolution));
+    }
+    let pixels = u64::from(cam.resolution[0]) * u64::from(cam.resolution[1]);
+    if pixels > MAX_PIXELS {
+        return cx.err(format!(
+            "resolution {:?} is {pixels} pixels, more than {MAX_PIXELS} (8192 x 4096): a render holds \
+             about 72 bytes per pixel in each of several images; lower the resolution",
+            cam.resolution
+        ));
+    }
+    Ok(Camera::new(to_world, cam.fov, cam.fov_axis, cam.resolution))
+}
+
 /// The file being built and the element being looked at, for error messages.
 struct Ctx<'a> {
     path: &'a Path,
@@ -165,29 +192,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
 
     let cam = desc.camera.get_ref();
     cx.at(desc.camera.span().start, "camera".into());
-    cx.finite(
-        "camera origin, target and up",
-        &[cam.origin, cam.target, cam.up].map(|v| v.to_array()).concat(),
-    )?;
-    let Some(to_world) = Transform::look_at(cam.origin, cam.target, cam.up) else {
-        return cx.err("origin equals target, or up is parallel to the view direction");
-    };
-    if !(cam.fov > 0.0 && cam.fov < 180.0) {
-        return cx.err(format!("fov {} must lie strictly between 0 and 180 degrees", cam.fov));
-    }
-    if cam.resolution.contains(&0) || cam.resolution.iter().any(|&r| r > 1 << 15) {
-        return cx
-            .err(format!("resolution {:?} must be between 1 and 32768 per axis", cam.resolution));
-    }
-    let pixels = u64::from(cam.resolution[0]) * u64::from(cam.resolution[1]);
-    if pixels > MAX_PIXELS {
-        return cx.err(format!(
-            "resolution {:?} is {pixels} pixels, more than {MAX_PIXELS} (8192 x 4096): a render holds \
-             about 72 bytes per pixel in each of several images; lower the resolution",
-            cam.resolution
-        ));
-    }
-    let camera = Camera::new(to_world, cam.fov, cam.fov_axis, cam.resolution);
+    let camera = camera(&cx, cam)?;
     let camera_medium = lookup(&cx, "camera medium", &cam.medium, global_medium)?;
 
     let r = &desc.render;

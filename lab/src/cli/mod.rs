@@ -377,29 +377,7 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     if let Some(m) = methods.iter().find(|m| !names.insert(m.name.clone())) {
         bail!("--method {}: two methods have this name", m.name);
     }
-    let mut files: Vec<String> = [
-        "results.md",
-        "results.csv",
-        "results.json",
-        "convergence.png",
-        "convergence.svg",
-        "strip.png",
-        "crops.png",
-    ]
-    .map(String::from)
-    .into();
-    for m in &methods {
-        files.extend(["exr", "png"].map(|e| format!("{}.{e}", m.name)));
-        files.push(format!("{}-error.png", m.name));
-    }
-    let paths: Vec<PathBuf> = files.iter().map(|f| a.out.join(f)).collect();
-    let labels: Vec<String> = files.iter().map(|f| format!("the {f} of --out")).collect();
-    let outputs: Vec<(&str, &Path)> =
-        labels.iter().zip(&paths).map(|(l, p)| (l.as_str(), p.as_path())).collect();
-    check_outputs(
-        &[("the scene", &a.scene.scene), ("the reference of --reference", &a.reference)],
-        &outputs,
-    )?;
+    check_compare_outputs(&a, &methods)?;
     let (rw, rh, reference, reference_error) = zerovar::output::read_exr_with_error(&a.reference)?;
     let [w, h] = scene.camera().resolution();
     if (rw, rh) != (w as usize, h as usize) {
@@ -476,6 +454,33 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     write_png(&a.out.join("crops.png"), cw as u32, ch as u32, &crops, 0.0)?;
     eprintln!("wrote {}", a.out.display());
     Ok(())
+}
+
+/// Refuses a `compare` whose outputs would replace its scene or reference, or each other.
+fn check_compare_outputs(a: &CompareArgs, methods: &[zerovar_lab::compare::Method]) -> Result<()> {
+    let mut files: Vec<String> = [
+        "results.md",
+        "results.csv",
+        "results.json",
+        "convergence.png",
+        "convergence.svg",
+        "strip.png",
+        "crops.png",
+    ]
+    .map(String::from)
+    .into();
+    for m in methods {
+        files.extend(["exr", "png"].map(|e| format!("{}.{e}", m.name)));
+        files.push(format!("{}-error.png", m.name));
+    }
+    let paths: Vec<PathBuf> = files.iter().map(|f| a.out.join(f)).collect();
+    let labels: Vec<String> = files.iter().map(|f| format!("the {f} of --out")).collect();
+    let outputs: Vec<(&str, &Path)> =
+        labels.iter().zip(&paths).map(|(l, p)| (l.as_str(), p.as_path())).collect();
+    check_outputs(
+        &[("the scene", &a.scene.scene), ("the reference of --reference", &a.reference)],
+        &outputs,
+    )
 }
 
 /// Two row-major images of equal height placed left and right.
