@@ -314,15 +314,8 @@ fn includes_and_cyclic_includes() {
     assert!(e.contains("remove one of these includes"), "{e}");
 }
 
-const GOOD: &str = r#"<scene version="3.0.0">
-    <sensor type="perspective">
-        <float name="fov" value="40"/>
-    </sensor>
-    <shape type="sphere">
-        <float name="radius" value="1"/>
-    </shape>
-</scene>
-"#;
+/// The smallest valid Mitsuba scene, edited into bad ones here and in `lab/tests/cli.rs`.
+const GOOD: &str = include_str!("data/minimal.xml");
 
 /// Each edit of `GOOD` fails at `place` (`file:line:column`) with a message holding `needles`.
 #[test]

@@ -462,16 +462,8 @@ fn reference_and_compare_end_to_end() {
     assert!(!stderr(&o).contains("panicked"));
 }
 
-/// A minimal valid Mitsuba scene, edited into bad ones.
-const GOOD_XML: &str = r#"<scene version="3.0.0">
-    <sensor type="perspective">
-        <float name="fov" value="40"/>
-    </sensor>
-    <shape type="sphere">
-        <float name="radius" value="1"/>
-    </shape>
-</scene>
-"#;
+/// The smallest valid Mitsuba scene (shared with `tests/xml.rs`), edited into bad ones.
+const GOOD_XML: &str = include_str!("../../tests/data/minimal.xml");
 
 #[test]
 fn cli_checks_and_renders_xml_and_fails_cleanly() {
