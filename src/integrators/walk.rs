@@ -210,7 +210,7 @@ fn walk<C: RadianceCache>(
             if nulls > MAX_NULL_CROSSINGS {
                 break;
             }
-            s.medium = scene.medium_after(&hit, s.ray.direction);
+            s.medium = scene.medium_after(&hit, s.ray.direction, s.medium);
             s.ray = Ray::new(offset_origin(hit.p, hit.ng, s.ray.direction), s.ray.direction);
             continue;
         }
@@ -563,7 +563,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         if !d.delta {
             record_vertex(self.ctx, hit.p, d.wi, d.pdf, s.beta, false, &direct);
         }
-        s.medium = scene.medium_after(hit, d.wi);
+        s.medium = scene.medium_after(hit, d.wi, s.medium);
         s.ray = Ray::new(offset_origin(hit.p, hit.ng, d.wi), d.wi);
         s.prev = Previous { position: hit.p, pdf: d.pdf, delta: d.delta };
         self.go_on(s, loaded, d.wi)
@@ -947,7 +947,7 @@ pub fn shadow_transmittance(
     counters: &mut Counters,
 ) -> Spectrum {
     let mut crossings = ArrayVec::<Crossing, SHADOW_CROSSINGS>::new();
-    match scene.trace_shadow(&ray, distance, &mut crossings) {
+    match scene.trace_shadow(&ray, distance, medium, &mut crossings) {
         ShadowTrace::Blocked => Spectrum::ZERO,
         ShadowTrace::Overflow => shadow_steps(scene, ray, distance, medium, sampler, counters),
         ShadowTrace::Clear => {
@@ -1006,7 +1006,7 @@ fn shadow_steps(
         if scene.surfaces[hit.shape as usize].bsdf != Bsdf::Null {
             return Spectrum::ZERO;
         }
-        medium = scene.medium_after(&hit, ray.direction);
+        medium = scene.medium_after(&hit, ray.direction, medium);
         let origin = offset_origin(hit.p, hit.ng, ray.direction);
         distance -= (origin - ray.origin).length();
         if distance <= 0.0 {
@@ -1094,7 +1094,7 @@ radiance = 1
             differ += usize::from((one - steps).abs().max_element() > 0.005 * steps.max_element());
             blocked += usize::from(steps.max_element() == 0.0);
             let mut crossings = ArrayVec::<Crossing, SHADOW_CROSSINGS>::new();
-            let trace = scene.trace_shadow(&ray, reach, &mut crossings);
+            let trace = scene.trace_shadow(&ray, reach, medium, &mut crossings);
             crossed += usize::from(trace == ShadowTrace::Clear && crossings.len() >= 3);
         }
         // Both must occur often for the comparison to mean anything.
@@ -1126,7 +1126,7 @@ radiance = 1
         let scene = crate::scene::load_str(path, &text, &[]).unwrap_or_else(|e| panic!("{e}"));
         let ray = Ray::new(Vec3A::new(-1.0, 0.1, 0.2), Vec3A::X);
         let mut crossings = ArrayVec::<Crossing, SHADOW_CROSSINGS>::new();
-        assert_eq!(scene.trace_shadow(&ray, 10.0, &mut crossings), ShadowTrace::Overflow);
+        assert_eq!(scene.trace_shadow(&ray, 10.0, None, &mut crossings), ShadowTrace::Overflow);
         let mut sampler = Sampler::new(7, 0, 0);
         let tr =
             shadow_transmittance(&scene, ray, 10.0, None, &mut sampler, &mut Counters::default());
@@ -1140,7 +1140,7 @@ radiance = 1
              angle = 90 }} }}, {{ translate = [6, 0, 0] }}]\nbsdf = {{ type = \"diffuse\" }}\n"
         );
         let scene = crate::scene::load_str(path, &wall, &[]).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(scene.trace_shadow(&ray, 10.0, &mut crossings), ShadowTrace::Blocked);
+        assert_eq!(scene.trace_shadow(&ray, 10.0, None, &mut crossings), ShadowTrace::Blocked);
         let tr =
             shadow_transmittance(&scene, ray, 10.0, None, &mut sampler, &mut Counters::default());
         assert_eq!(tr, Spectrum::ZERO);

@@ -229,6 +229,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
             bsdf: bsdf(&cx, d.bsdf.as_ref())?,
             interior: lookup(&cx, "interior", &d.interior, global_medium)?,
             exterior: lookup(&cx, "exterior", &d.exterior, global_medium)?,
+            keeps_medium: d.keeps_medium,
             light,
             flip: d.flip_normals,
             kind: d.kind.clone(),

@@ -207,6 +207,11 @@ pub struct ShapeDesc {
     pub interior: Option<String>,
     /// Medium outside.
     pub exterior: Option<String>,
+    /// Rays crossing or leaving the shape keep the medium they travel in, whatever `interior`
+    /// and `exterior` say: Mitsuba's rule for a shape that names no medium (set by the XML
+    /// reader; TOML shapes without media border the global medium instead).
+    #[serde(skip)]
+    pub keeps_medium: bool,
     /// Make the shape an area light.
     pub emitter: Option<EmitterDesc>,
 }

@@ -137,12 +137,29 @@ pub struct Surface {
     pub interior: Option<u32>,
     /// Medium in front of the normal.
     pub exterior: Option<u32>,
+    /// No medium transition: rays keep their medium here (`interior` and `exterior` unused).
+    pub keeps_medium: bool,
     /// The area light this shape carries.
     pub light: Option<u32>,
     /// Whether the normals were flipped.
     pub flip: bool,
     /// Short description (kind), for reports.
     pub kind: String,
+}
+
+impl Surface {
+    /// The medium beyond the surface for a ray going `inward` (against the normal) from
+    /// `current`.
+    #[inline]
+    pub fn medium_beyond(&self, inward: bool, current: Option<u32>) -> Option<u32> {
+        if self.keeps_medium {
+            current
+        } else if inward {
+            self.interior
+        } else {
+            self.exterior
+        }
+    }
 }
 
 /// Integrator settings.
@@ -314,13 +331,14 @@ impl Scene {
         Some(SurfaceHit { t: h.hit.t, p, ng, ns, uv, shape })
     }
 
-    /// Traces a shadow ray to `t_max` in one traversal: [`ShadowTrace::Blocked`] if any
-    /// surface but a null one lies in the way; otherwise the null surfaces it crosses, sorted
-    /// along the ray, each with the medium the ray enters there.
+    /// Traces a shadow ray that starts in `medium` to `t_max` in one traversal:
+    /// [`ShadowTrace::Blocked`] if any surface but a null one lies in the way; otherwise the
+    /// null surfaces it crosses, sorted along the ray, each with the medium the ray enters there.
     pub(crate) fn trace_shadow<const N: usize>(
         &self,
         ray: &Ray,
         t_max: f32,
+        mut medium: Option<u32>,
         crossings: &mut arrayvec::ArrayVec<Crossing, N>,
     ) -> ShadowTrace {
         crossings.clear();
@@ -336,18 +354,17 @@ impl Scene {
                 if s.flip {
                     ng = -ng;
                 }
-                let inward = ray.direction.dot(ng) < 0.0;
-                Crossing { t: h.hit.t, medium: if inward { s.interior } else { s.exterior } }
+                medium = s.medium_beyond(ray.direction.dot(ng) < 0.0, medium);
+                Crossing { t: h.hit.t, medium }
             }));
         }
         trace
     }
 
-    /// The medium a ray leaving `hit` along `dir` travels in.
+    /// The medium a ray leaving `hit` along `dir` travels in, having come in `current`.
     #[inline]
-    pub fn medium_after(&self, hit: &SurfaceHit, dir: Vec3A) -> Option<u32> {
-        let s = &self.surfaces[hit.shape as usize];
-        if dir.dot(hit.ng) < 0.0 { s.interior } else { s.exterior }
+    pub fn medium_after(&self, hit: &SurfaceHit, dir: Vec3A, current: Option<u32>) -> Option<u32> {
+        self.surfaces[hit.shape as usize].medium_beyond(dir.dot(hit.ng) < 0.0, current)
     }
 
     /// World bounds of all shapes.

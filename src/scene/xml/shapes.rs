@@ -111,6 +111,7 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         transform,
         flip_normals,
         bsdf,
+        keeps_medium: interior.is_none() && exterior.is_none(),
         interior,
         exterior,
         emitter,
