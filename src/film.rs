@@ -33,6 +33,17 @@ impl PixelSum {
         self.count += 1;
     }
 
+    /// The samples of this sum that `part` (a sum of some of them) does not hold.
+    pub fn without(&self, part: &PixelSum) -> PixelSum {
+        PixelSum {
+            rgb: std::array::from_fn(|i| self.rgb[i] - part.rgb[i]),
+            lum_sq: self.lum_sq - part.lum_sq,
+            lum_cube: self.lum_cube - part.lum_cube,
+            rgb_sq: std::array::from_fn(|i| self.rgb_sq[i] - part.rgb_sq[i]),
+            count: self.count - part.count,
+        }
+    }
+
     /// Merges another sum into this one.
     pub fn merge(&mut self, o: &PixelSum) {
         for i in 0..3 {
@@ -85,6 +96,9 @@ pub struct Film {
     pub(crate) width: u32,
     pub(crate) height: u32,
     pub(crate) pixels: Vec<PixelSum>,
+    /// Per pixel, the sum of its odd-numbered samples alone, when the film keeps its two
+    /// halves apart (empty otherwise): each half's variance can then weigh the other half.
+    pub(crate) odd: Vec<PixelSum>,
 }
 
 impl Film {
@@ -105,7 +119,26 @@ impl Film {
 
     /// An empty film.
     pub fn new(width: u32, height: u32) -> Self {
-        Self { width, height, pixels: vec![PixelSum::default(); (width * height) as usize] }
+        let pixels = vec![PixelSum::default(); (width * height) as usize];
+        Self { width, height, pixels, odd: Vec::new() }
+    }
+
+    /// An empty film that also keeps the sums of odd-numbered samples apart.
+    pub fn with_halves(width: u32, height: u32) -> Self {
+        let film = Self::new(width, height);
+        Self { odd: film.pixels.clone(), ..film }
+    }
+
+    /// Per pixel, the sum of the even-numbered (`half` 0) or odd-numbered (1) samples; `None`
+    /// when the film does not keep its halves.
+    pub fn half(&self, half: usize) -> Option<Vec<PixelSum>> {
+        if self.odd.len() != self.pixels.len() {
+            return None;
+        }
+        Some(match half {
+            0 => self.pixels.iter().zip(&self.odd).map(|(all, odd)| all.without(odd)).collect(),
+            _ => self.odd.clone(),
+        })
     }
 
     /// The image as row-major RGB means.

@@ -36,7 +36,7 @@ pub use settings::{SETTINGS, Setting, SettingError, TRAIN_BUDGET, setting};
 pub use stats::{RenderStats, TrainingStats};
 pub use training::{TrainingReport, TrainingStop};
 
-use combine::{combine_by_inverse_variance, pixel_estimates};
+use combine::{combine_training, pixel_estimates};
 use passes::{
     Largest, Pass, TILE, TileWork, camera_sample, keep_largest, render_pass, tiles, with_tile_walk,
 };
@@ -394,7 +394,8 @@ fn final_phase(
         largest: options.fireflies > 0,
     };
     let [w, h] = scene.camera.resolution();
-    let mut film = Film::new(w, h);
+    let combine = options.guiding.combine_training && !training_films.is_empty();
+    let mut film = if combine { Film::with_halves(w, h) } else { Film::new(w, h) };
     let mut counters = Counters::default();
     let mut largest =
         vec![Largest::default(); if options.fireflies > 0 { (w * h) as usize } else { 0 }];
@@ -464,11 +465,7 @@ fn final_phase(
         };
         fireflies::find(scene, pass(0, 0), &film, &largest, options.fireflies, estimate_for)
     });
-    let image = if options.guiding.combine_training && !training_films.is_empty() {
-        combine_by_inverse_variance(&training_films, &film)
-    } else {
-        film.image()
-    };
+    let image = if combine { combine_training(&training_films, &film) } else { film.image() };
     RenderResult {
         film,
         image,

@@ -60,8 +60,8 @@ pub struct GuidingOptions {
     /// discarding them (the default: at equal time it lowers the error where guiding pays and
     /// changes nothing where it does not; see docs/experiments.md). The weights follow
     /// relMSE's, so unlike the render phase's samples they depend a little on the scene's
-    /// units. Each weight is estimated from the image it weighs, so the combination is
-    /// consistent but not exactly unbiased; discarding the training images is.
+    /// units. Each image's weight is estimated from its other half of samples (even against
+    /// odd), never from the samples it weighs, so no image's own fireflies lower its weight.
     pub combine_training: bool,
     /// Guide only the 16x16 tiles where a pilot after training finds guiding more efficient
     /// than unguided sampling (see [`Selection`](super::Selection)); the others render unguided.

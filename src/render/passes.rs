@@ -125,6 +125,9 @@ pub(super) fn render_pass(
             let (x, y) = (x0 + i as u32 % tw, y0 + i as u32 / tw);
             let p = (y * w + x) as usize;
             film.pixels[p].merge(s);
+            if !film.odd.is_empty() {
+                film.odd[p].merge(&tile.odd[i]);
+            }
             if let Some(l) = tile.largest.get(i) {
                 out.largest[p].merge(l);
             }
@@ -176,6 +179,8 @@ pub(super) struct RenderTile<'a, 'p> {
 pub(super) struct TileOutput {
     /// Per pixel of the tile, row by row.
     pub(super) sums: Vec<PixelSum>,
+    /// The same, of the odd-numbered samples alone.
+    pub(super) odd: Vec<PixelSum>,
     pub(super) counters: Counters,
     /// Training samples (when recording).
     pub(super) samples: Vec<Sample>,
@@ -196,9 +201,10 @@ impl TileWork for RenderTile<'_, '_> {
         let (x0, y0) = (tx * TILE, ty * TILE);
         let (x1, y1) = ((x0 + TILE).min(w), (y0 + TILE).min(h));
         out.sums.reserve(((x1 - x0) * (y1 - y0)) as usize);
+        out.odd.reserve(((x1 - x0) * (y1 - y0)) as usize);
         for y in y0..y1 {
             for x in x0..x1 {
-                let mut sum = PixelSum::default();
+                let (mut sum, mut odd) = (PixelSum::default(), PixelSum::default());
                 let mut largest = Largest::default();
                 for s in pass.first..pass.first + pass.count {
                     let mut ctx = WalkContext {
@@ -216,19 +222,24 @@ impl TileWork for RenderTile<'_, '_> {
                         &mut ctx,
                         &mut out.counters,
                     );
-                    if is_finite(l) {
-                        sum.add(l);
+                    let finite = is_finite(l);
+                    if finite {
                         largest.offer(l, s);
                         if pass.record {
                             recorder.finish(&mut out.samples);
                         }
                     } else {
                         out.counters.invalid_samples += 1;
-                        sum.add(Spectrum::ZERO);
                         recorder.clear();
+                    }
+                    let l = if finite { l } else { Spectrum::ZERO };
+                    sum.add(l);
+                    if s % 2 == 1 {
+                        odd.add(l);
                     }
                 }
                 out.sums.push(sum);
+                out.odd.push(odd);
                 if pass.largest {
                     out.largest.push(largest);
                 }

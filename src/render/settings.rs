@@ -151,7 +151,8 @@ pub const SETTINGS: &[Setting] = &[
         key: "training-images",
         value: "WHAT",
         help: "What becomes of the training passes' images: combine (averaged into the result \
-               by inverse variance) or discard [default: combine]",
+               by inverse variance, each half of an image weighed by the other's) or discard \
+               [default: combine]",
         trains: false,
         set: |o, v| {
             o.combine_training = match v.trim() {

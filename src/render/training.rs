@@ -176,7 +176,7 @@ impl Training {
         while !self.done && (self.films.len() as u32) < until.min(last) {
             let pass = self.films.len() as u32;
             let count = self.next;
-            let mut film = Film::new(w, h);
+            let mut film = Film::with_halves(w, h);
             let estimate = pixel_estimates(&self.films);
             // Each pass draws from its own streams, independent of the render phase's.
             let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
