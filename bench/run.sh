@@ -225,6 +225,14 @@ done
 python3 bench/tables.py summary bench/out scenes/bench "$mitsuba" --held-out "$held_out" \
   --trim "$trim" > "$summary"
 
+# Sections other scripts write (bench/unbiased.sh's "Unbiasedness", the "Ablation") are kept.
+kept=$(mktemp)
+trap 'rm -f "$details" "$summary" "$kept"' EXIT
+if [ -f "$results" ]; then
+  awk '/^## (Unbiasedness|Ablation)$/ { keep = 1 } /^## / && !/^## (Unbiasedness|Ablation)$/ { keep = 0 }
+       keep' "$results" > "$kept"
+fi
+
 # The header last: which Mitsuba variants ran is known only now.
 dirty=""
 if ! git diff --quiet HEAD -- 2> /dev/null; then
@@ -263,5 +271,9 @@ print(v or "none: every run failed (see each scene)")' ${jsons[@]+"${jsons[@]}"}
   done
   cat "$summary"
   cat "$details"
+  if [ -s "$kept" ]; then
+    echo
+    cat "$kept"
+  fi
 } > "$results"
 echo "wrote $results" >&2

@@ -816,7 +816,7 @@ fn every_guided_component_converges_to_the_unguided_image() {
 
 #[test]
 fn training_images_combined_by_inverse_variance_converge_to_the_unguided_image() {
-    // One weight per image, estimated from the images themselves: the combined image is
+    // One weight per image half, estimated from the other half's samples: the combined image is
     // checked over independent renders, each quadrant's mean luminance over 16 seeds against
     // the unguided reference, the spread over seeds giving the standard error.
     for (name, text) in SCENES {
@@ -1215,5 +1215,83 @@ fn guided_flights_estimate_a_point_lights_single_scattering_without_bias() {
             }
             estimate.assert_matches(expected, 4.5, &what);
         }
+    }
+}
+
+/// A slab of fog over a floor, lit by a point light and a dim sky, the camera outside: each
+/// hard case (`$sigma`, `$albedo`, `$g`) of the standards, rendered with full guiding, must
+/// give the unguided image (and the thinnest fog the image without it).
+const HARD_SLAB: &str = r#"
+[camera]
+origin = [0, 1.2, 3]
+target = [0, 0.3, 0]
+fov = 50
+resolution = [12, 10]
+
+[media.fog]
+type = "homogeneous"
+sigma_t = $sigma
+albedo = $albedo
+phase = { type = "hg", g = $g }
+
+[[shapes]]
+type = "cube"
+transform = [{ scale = [1, 0.3, 1] }, { translate = [0, 0.31, 0] }]
+bsdf = { type = "null" }
+interior = "fog"
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 3 }]
+bsdf = { type = "diffuse", reflectance = [0.6, 0.5, 0.4] }
+
+[[lights]]
+type = "point"
+position = [0.8, 1.5, 0.6]
+intensity = 6
+
+[[lights]]
+type = "constant"
+radiance = 0.2
+"#;
+
+#[test]
+fn hard_cases_render_guided_as_unguided() {
+    let cases = [
+        ("albedo 0", "2", "0", "0.3"),
+        ("albedo 1", "2", "1", "0.3"),
+        ("g 0.99", "2", "0.95", "0.99"),
+        ("g -0.99", "2", "0.95", "-0.99"),
+        ("sigma_t 1e-6", "1e-6", "0.95", "0.3"),
+        ("sigma_t 1e5", "1e5", "0.95", "0.3"),
+    ];
+    for (what, sigma, albedo, g) in cases {
+        let text = HARD_SLAB.replace("$sigma", sigma).replace("$albedo", albedo).replace("$g", g);
+        let s = scene(&text);
+        let unguided = quadrant_means(&render_with(&s, Components::OFF, 0.0, 4096, 31));
+        let guided = quadrant_means(&render_with(&s, Components::FULL, 0.5, 1024, 32));
+        for (k, (a, b)) in guided.iter().zip(&unguided).enumerate() {
+            let z = z_score(a, b);
+            assert!(
+                z.abs() < 4.5,
+                "{what}, quadrant {k}: guided {} vs {} (z = {z:.2})",
+                a.mean,
+                b.mean
+            );
+        }
+    }
+    // The thinnest fog is all but vacuum: the image without it, within its noise.
+    let thin = HARD_SLAB.replace("$sigma", "1e-6").replace("$albedo", "0.95").replace("$g", "0.3");
+    let vacuum = thin.replace("interior = \"fog\"\n", "");
+    let a = quadrant_means(&render_with(&scene(&thin), Components::FULL, 0.5, 1024, 33));
+    let b = quadrant_means(&render_with(&scene(&vacuum), Components::OFF, 0.0, 4096, 34));
+    for (k, (a, b)) in a.iter().zip(&b).enumerate() {
+        let z = z_score(a, b);
+        assert!(
+            z.abs() < 4.5,
+            "sigma_t 1e-6 against vacuum, quadrant {k}: {} vs {} (z = {z:.2})",
+            a.mean,
+            b.mean
+        );
     }
 }
