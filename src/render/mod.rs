@@ -178,9 +178,10 @@ pub const MIN_ADAPTIVE_SPP: u32 = 16;
 /// choice must gain over guiding everywhere (`select::PARTIAL_MARGIN`).
 const DECISIVE_GAIN: f64 = 2.0;
 
-/// Whether the early look settles adaptive guiding's choice (see [`DECISIVE_GAIN`]).
+/// Whether the early look settles adaptive guiding's choice (see [`DECISIVE_GAIN`]); never
+/// where its pilot cannot be trusted ([`EARLY_TAIL_LIMIT`]).
 fn decisive(early: &Selection) -> bool {
-    early.guided_tiles == early.tiles && early.validated_gain >= DECISIVE_GAIN
+    early.guided_tiles == early.tiles && early.validated_gain >= DECISIVE_GAIN && trusted(early)
 }
 
 /// The render phase guiding every tile with the early look's candidate, without a pilot.
@@ -215,6 +216,25 @@ const EARLY_PILOT_PASSES: u32 = 2;
 /// docs/experiments.md).
 const EARLY_MIN_GAIN: f64 = 1.1;
 
+/// The share of the unguided pilot's relative variance held by its 1% of pixels with the most
+/// (`Selection::unguided_tail_share`) from which the early look cannot tell: training goes on
+/// and the pilot after it decides. There a few rare bright paths make the error, which a
+/// 4-spp pilot mostly misses, so its gains scatter by orders of magnitude from seed to seed;
+/// light-tailed images hold a few percent there, their pixels' own sampling noise. Going on
+/// wrongly costs at most the guided part of training's share; stopping wrongly has cost ten
+/// times the error and more (see docs/experiments.md).
+const EARLY_TAIL_LIMIT: f64 = 0.45;
+
+/// Whether the early look's pilot can be trusted: its unguided samples are not heavy-tailed.
+fn trusted(early: &Selection) -> bool {
+    early.unguided_tail_share < EARLY_TAIL_LIMIT
+}
+
+/// Whether the early look's `selection` stops training: a trusted pilot found no gain worth it.
+fn stops_training(selection: &Selection) -> bool {
+    selection.validated_gain < EARLY_MIN_GAIN && trusted(selection)
+}
+
 /// Adaptive guiding's early look: after a short training, a pilot judges whether guiding
 /// can pay anywhere; if not, training stops and the rest of its budget (and the render's)
 /// goes to unguided sampling. `None` means training goes on, the pilot's time counted as
@@ -232,7 +252,7 @@ fn early_pilot(
     let guidance = training.guidance();
     let last_pass = 1 << (EARLY_PILOT_PASSES - 1);
     let selection = select::pilot(scene, options, &guidance, last_pass, 4, progress)?.selection;
-    if selection.validated_gain >= EARLY_MIN_GAIN {
+    if !stops_training(&selection) {
         training.seconds += selection.seconds;
         training.early = Some(selection);
         return None;
@@ -477,5 +497,42 @@ fn final_phase(
         selection: None,
         cancelled: progress.stopped(),
         fireflies,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn early(validated_gain: f64, unguided_tail_share: f64) -> Selection {
+        Selection {
+            tiles: 4,
+            guided_tiles: 4,
+            components: "full".into(),
+            candidates: Vec::new(),
+            pilot_spp: 4,
+            seconds: 0.0,
+            cost_ratio: 1.0,
+            variance_ratio: 1.0,
+            gain: validated_gain,
+            everywhere_gain: validated_gain,
+            validated_gain,
+            stopped_training: false,
+            early: None,
+            decided_early: false,
+            unguided_tail_share,
+        }
+    }
+
+    /// The early look stops training, or settles the choice, only on a pilot whose unguided
+    /// error is not up to a few rare paths.
+    #[test]
+    fn a_heavy_tailed_early_look_neither_stops_training_nor_decides() {
+        assert!(stops_training(&early(0.9, 0.1)));
+        assert!(!stops_training(&early(1.2, 0.1)));
+        assert!(!stops_training(&early(0.5, 0.6)));
+        assert!(decisive(&early(2.5, 0.1)));
+        assert!(!decisive(&early(2.5, 0.6)));
+        assert!(!decisive(&Selection { guided_tiles: 3, ..early(2.5, 0.1) }));
     }
 }

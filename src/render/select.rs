@@ -72,6 +72,9 @@ pub struct Selection {
     /// was made from does not inflate it; it decides, and where it is not above 1 nothing is
     /// guided.
     pub validated_gain: f64,
+    /// The share of the unguided pilot's relative variance held by its 1% of pixels with the
+    /// most: a few percent for light tails, most of it where rare bright paths make the error.
+    pub unguided_tail_share: f64,
     /// Whether this pilot ran early in training and found too little `gain` to go on: the
     /// rest of the training budget was rendered unguided.
     pub stopped_training: bool,
@@ -203,6 +206,7 @@ pub(super) fn pilot(
         }
     }
     let mut best = best.expect("at least the requested components");
+    best.selection.unguided_tail_share = tail_share(&unguided, estimate);
     let pays = best.selection.validated_gain > 1.0;
     if !pays {
         // No choice of tiles pays out of sample: the pilot cannot tell guiding from noise.
@@ -212,6 +216,25 @@ pub(super) fn pilot(
     best.selection.seconds = start.elapsed().as_secs_f64();
     best.selection.candidates = gains;
     Some(best)
+}
+
+/// The share of the relative variance of `pilot`'s pixels (both halves pooled, each pixel
+/// weighted as relMSE weighs it by `estimate`) that its 1% of pixels with the most hold.
+fn tail_share(pilot: &[(Film, Vec<Counters>); 2], estimate: &[f32]) -> f64 {
+    let mut v: Vec<f64> = (0..estimate.len())
+        .map(|p| {
+            let mut sum = pilot[0].0.pixels[p];
+            sum.merge(&pilot[1].0.pixels[p]);
+            sum.luminance_variance() / (f64::from(estimate[p]).powi(2) + EPSILON)
+        })
+        .collect();
+    let total: f64 = v.iter().sum();
+    if total.is_nan() || total <= 0.0 {
+        return 0.0;
+    }
+    v.sort_unstable_by(|a, b| b.total_cmp(a));
+    let top = v.len().div_ceil(100);
+    v[..top].iter().sum::<f64>() / total
 }
 
 /// The tiles to guide by one pilot's measures (`columns` tiles per row): the best set
@@ -293,6 +316,7 @@ fn summarise(
         stopped_training: false,
         early: None,
         decided_early: false,
+        unguided_tail_share: f64::NAN,
     }
 }
 
@@ -451,6 +475,45 @@ mod tests {
             .map(|(m, &g)| pick(m, g))
             .fold((0.0, 0.0), |(v, c), (dv, dc)| (v + dv, c + dc));
         v * c
+    }
+
+    /// Two pilot halves of `n` pixels with 2 samples each: `value(pixel, sample)`.
+    fn pilot_of(n: u32, value: impl Fn(u32, u32) -> f32) -> [(Film, Vec<Counters>); 2] {
+        [0, 1].map(|half| {
+            let mut film = Film::new(n, 1);
+            for (p, sum) in film.pixels.iter_mut().enumerate() {
+                for s in 0..2 {
+                    sum.add(crate::math::Spectrum::splat(value(p as u32, 2 * half + s)));
+                }
+            }
+            (film, Vec::new())
+        })
+    }
+
+    /// Light tails leave the top 1% of pixels a few percent of the variance; one pixel in
+    /// four hundred with a firefly holds most of it.
+    #[test]
+    fn the_tail_share_tells_rare_bright_paths_from_light_noise() {
+        let estimate = vec![1.0f32; 400];
+        // Every pixel 1 or 1.5, in an order that varies with the pixel.
+        let light = pilot_of(400, |p, s| if (p * 7 + s * 3) % 4 < 2 { 1.0 } else { 1.5 });
+        let share = tail_share(&light, &estimate);
+        assert!(share < 0.05, "light tails: {share}");
+        let heavy = pilot_of(400, light_or_firefly);
+        let share = tail_share(&heavy, &estimate);
+        assert!(share > 0.9, "one firefly: {share}");
+        // A black pilot has no tail.
+        assert_eq!(tail_share(&pilot_of(400, |_, _| 0.0), &estimate), 0.0);
+    }
+
+    fn light_or_firefly(p: u32, s: u32) -> f32 {
+        if p == 17 && s == 2 {
+            400.0
+        } else if (p + s).is_multiple_of(2) {
+            1.0
+        } else {
+            1.5
+        }
     }
 
     /// Where one half of the pilot favours guiding a tile and the other half the opposite,
