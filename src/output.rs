@@ -154,12 +154,13 @@ pub fn write_exr_with_error(
         }),
     );
     let attributes = ImageAttributes::new(IntegerBounds::from_dimensions(size));
-    Image::empty(attributes)
-        .with_layer(mean)
-        .with_layer(error)
-        .write()
-        .to_file(path)
-        .map_err(|e| OutputError::Exr { path: path.display().to_string(), message: e.to_string() })
+    let image = Image::empty(attributes).with_layer(mean).with_layer(error);
+    let fail = |message: String| OutputError::Exr { path: path.display().to_string(), message };
+    crate::files::write_atomically(
+        path,
+        |tmp| image.write().to_file(tmp).map_err(|e| fail(e.to_string())),
+        |e| fail(e.to_string()),
+    )
 }
 
 fn layer_attributes(name: &str, meta: &ImageMetadata) -> exr::meta::header::LayerAttributes {
@@ -196,10 +197,13 @@ pub fn write_exr(
     });
     let attributes = layer_attributes("rgb", meta);
     let layer = Layer::new((w, height as usize), attributes, Encoding::SMALL_LOSSLESS, channels);
-    Image::from_layer(layer)
-        .write()
-        .to_file(path)
-        .map_err(|e| OutputError::Exr { path: path.display().to_string(), message: e.to_string() })
+    let image = Image::from_layer(layer);
+    let fail = |message: String| OutputError::Exr { path: path.display().to_string(), message };
+    crate::files::write_atomically(
+        path,
+        |tmp| image.write().to_file(tmp).map_err(|e| fail(e.to_string())),
+        |e| fail(e.to_string()),
+    )
 }
 
 /// The sRGB transfer curve of a linear value, clamped to [0, 1].
@@ -219,8 +223,15 @@ pub fn write_png(
     let gain = exposure.exp2();
     let bytes: Vec<u8> =
         pixels.iter().flat_map(|c| c.map(|v| (srgb(v * gain) * 255.0 + 0.5) as u8)).collect();
-    image::save_buffer(path, &bytes, width, height, image::ColorType::Rgb8)
-        .map_err(|e| OutputError::Png { path: path.display().to_string(), message: e.to_string() })
+    let fail = |message: String| OutputError::Png { path: path.display().to_string(), message };
+    crate::files::write_atomically(
+        path,
+        |tmp| {
+            image::save_buffer(tmp, &bytes, width, height, image::ColorType::Rgb8)
+                .map_err(|e| fail(e.to_string()))
+        },
+        |e| fail(e.to_string()),
+    )
 }
 
 #[cfg(test)]

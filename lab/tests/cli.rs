@@ -557,3 +557,54 @@ fn outputs_never_replace_inputs() {
     assert_eq!(std::fs::read(&scene).unwrap(), before, "the scene was replaced");
     assert_eq!(std::fs::read(&reference).unwrap(), reference_before, "the reference was replaced");
 }
+
+/// An output that cannot be written fails before any work, naming the flag and the reason,
+/// and a render leaves no partial or temporary file beside its outputs.
+#[test]
+fn unwritable_outputs_fail_before_any_work() {
+    let scene = write("writable.toml", GOOD.replace("cloud.vol", "writable.vol"));
+    write("writable.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let s = scene.to_str().unwrap();
+    let dir = temp_dir().join("writable-out");
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("a-directory.json")).unwrap();
+    let missing = temp_dir().join("no-such-directory");
+    let at = |p: &std::path::Path, f: &str| p.join(f).to_str().unwrap().to_string();
+    let out = at(&dir, "out.exr");
+    for (args, needles) in [
+        (
+            vec!["render", s, "-o", &at(&missing, "x.exr"), "--spp", "512"],
+            vec!["-o", "no-such-directory", "does not exist"],
+        ),
+        (
+            vec!["render", s, "-o", &out, "--stats", &at(&missing, "s.json"), "--spp", "512"],
+            vec!["--stats", "does not exist"],
+        ),
+        (
+            vec!["render", s, "-o", &out, "--stats", &at(&dir, "a-directory.json"), "--spp", "512"],
+            vec!["--stats", "a directory"],
+        ),
+        (vec!["train", s, "-o", &at(&missing, "f.field")], vec!["-o", "does not exist"]),
+        (
+            vec!["reference", s, "-o", &at(&missing, "r.exr"), "--spp", "512"],
+            vec!["-o", "does not exist"],
+        ),
+    ] {
+        let o = zerovar(&args);
+        let err = stderr(&o);
+        assert!(!o.status.success(), "{args:?} succeeded");
+        for n in needles {
+            assert!(err.contains(n), "{args:?}: {n} not in {err}");
+        }
+        // A render that ran before failing would have written its image.
+        assert!(!dir.join("out.exr").exists(), "{args:?} rendered before failing");
+    }
+    let o = zerovar(&["render", s, "-o", &out, "--spp", "2", "--quiet"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["a-directory.json", "out.exr", "out.png"]);
+}

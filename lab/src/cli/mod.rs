@@ -377,6 +377,9 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     if let Some(m) = methods.iter().find(|m| !names.insert(m.name.clone())) {
         bail!("--method {}: two methods have this name", m.name);
     }
+    // Created before the checks, which try writing in it.
+    std::fs::create_dir_all(&a.out)
+        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
     check_compare_outputs(&a, &methods)?;
     let (rw, rh, reference, reference_error) = zerovar::output::read_exr_with_error(&a.reference)?;
     let [w, h] = scene.camera().resolution();
@@ -387,8 +390,6 @@ fn run_compare(a: CompareArgs) -> Result<()> {
         );
     }
     let crop = a.crop.as_deref().map(|c| parse_crop(c, w as usize, h as usize)).transpose()?;
-    std::fs::create_dir_all(&a.out)
-        .with_context(|| format!("{}: cannot create the output directory", a.out.display()))?;
     if reference_error.is_none() {
         eprintln!(
             "note: {} has no `stderr` layer, so its own noise stays in every relMSE (a reference from `zerovar reference` has one)",
@@ -414,7 +415,8 @@ fn run_compare(a: CompareArgs) -> Result<()> {
     print!("{table}");
     let write = |name: &str, text: String| -> Result<()> {
         let path = a.out.join(name);
-        std::fs::write(&path, text).with_context(|| format!("{}: cannot write", path.display()))
+        write_atomically(&path, |tmp| Ok(std::fs::write(tmp, &text)?))
+            .with_context(|| format!("{}: cannot write", path.display()))
     };
     write("results.md", table.clone())?;
     write("results.csv", csv(&results))?;
@@ -544,12 +546,13 @@ fn run_train(a: TrainArgs) -> Result<()> {
         true
     })?;
     bar.finish_and_clear();
-    // Created only now, so a failed or cancelled training leaves no empty file behind.
-    let file = std::fs::File::create(&a.output)
-        .with_context(|| format!("{}: cannot create the field file", a.output.display()))?;
-    field
-        .save(std::io::BufWriter::new(file))
-        .with_context(|| format!("{}: cannot write the field", a.output.display()))?;
+    // Written only now and atomically, so a failed or cancelled training leaves no partial
+    // file behind.
+    write_atomically(&a.output, |tmp| -> Result<()> {
+        let file = std::fs::File::create(tmp)?;
+        Ok(field.save(std::io::BufWriter::new(file))?)
+    })
+    .with_context(|| format!("{}: cannot write the field", a.output.display()))?;
     eprintln!(
         "{}: trained {} passes ({} spp) in {:.2} s: {} regions, {} lobes, {} KiB -> {}",
         a.scene.scene.display(),
@@ -794,9 +797,14 @@ fn tell(
 }
 
 fn write_stats(path: &Path, stats: &RenderStats) -> Result<()> {
-    let json = serde_json::to_string_pretty(stats)?;
-    std::fs::write(path, json + "\n")
+    let json = serde_json::to_string_pretty(stats)? + "\n";
+    write_atomically(path, |tmp| Ok(std::fs::write(tmp, &json)?))
         .with_context(|| format!("{}: cannot write statistics", path.display()))
+}
+
+/// Writes `path` atomically through `write` (see `zerovar::files::write_atomically`).
+fn write_atomically(path: &Path, write: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+    zerovar::files::write_atomically(path, write, anyhow::Error::from)
 }
 
 fn progress_bar(visible: bool) -> ProgressBar {

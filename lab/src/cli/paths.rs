@@ -1,5 +1,6 @@
 //! Output paths checked before any work: none may be an input or another output, so that a
-//! mistyped flag never replaces the scene, the reference or a field, nor one output another.
+//! mistyped flag never replaces the scene, the reference or a field, nor one output another,
+//! and each must be writable, so that a long render never ends in an error about its output.
 
 use anyhow::{Result, bail};
 use std::path::{Path, PathBuf};
@@ -16,8 +17,9 @@ fn resolved(path: &Path) -> PathBuf {
     }
 }
 
-/// Refuses an output that is one of the inputs or that another output also writes. Each path
-/// comes with what names it (a flag, or what it is).
+/// Refuses an output that is one of the inputs, that another output also writes, or that
+/// cannot be written (a missing or read-only directory). Each path comes with what names it
+/// (a flag, or what it is).
 pub(super) fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)]) -> Result<()> {
     let inputs: Vec<(&str, &Path, PathBuf)> =
         inputs.iter().map(|&(what, p)| (what, p, resolved(p))).collect();
@@ -34,6 +36,12 @@ pub(super) fn check_outputs(inputs: &[(&str, &Path)], outputs: &[(&str, &Path)])
         if let Some((other, _)) = written.iter().find(|(_, p)| *p == o) {
             bail!(
                 "{flag} {}: {other} is written there too; give them different paths",
+                out.display()
+            );
+        }
+        if let Err(e) = zerovar::files::check_writable(out) {
+            bail!(
+                "{flag} {}: cannot write there ({e}); give a path in a writable directory",
                 out.display()
             );
         }
