@@ -307,9 +307,33 @@ fn trains_a_field_and_renders_with_it() {
             vec!["--guiding", "full", "--parallax", "sideways"],
             "--parallax `sideways`: give on or off",
         ),
+        // With a saved field nothing trains.
+        (
+            vec!["--field", f, "--train-passes", "3"],
+            "--train-passes: rendering with --field trains nothing",
+        ),
+        (vec!["--field", f, "--train-share", "0.5"], "--train-share: rendering with --field"),
+        (vec!["--field", f, "--training-images", "discard"], "--training-images: rendering with"),
     ] {
         let o = zerovar(&[&["render", s, "-o", e, "--quiet"][..], &args].concat());
         assert!(!o.status.success() && stderr(&o).contains(needle), "{args:?}: {}", stderr(&o));
+    }
+    // A field with data appended, or trained on another scene, is refused.
+    let mut bytes = std::fs::read(&field).unwrap();
+    bytes.extend_from_slice(b"garbage");
+    let appended = write("appended.zvg", bytes);
+    let other = write(
+        "other.toml",
+        GOOD.replace("type = \"cube\"\n", "type = \"cube\"\ntransform = [{ scale = 2 }]\n"),
+    );
+    assert_ne!(std::fs::read_to_string(&other).unwrap(), GOOD, "the other scene is the same");
+    for (scene, field, needles) in [
+        (s, appended.to_str().unwrap(), ["appended.zvg", "data after the end"]),
+        (other.to_str().unwrap(), f, ["--field", "trained on a scene with bounds"]),
+    ] {
+        let o = zerovar(&["render", scene, "-o", e, "--spp", "2", "--field", field, "--quiet"]);
+        let err = stderr(&o);
+        assert!(!o.status.success() && needles.iter().all(|n| err.contains(n)), "{err}");
     }
 }
 

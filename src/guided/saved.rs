@@ -5,19 +5,22 @@
 //! The file is `ZVTRAIN\0`, a format version (u32), the field's length (u64) and the field in
 //! the guiding crate's own format, then the table: a count (u32), that many f32 values, and
 //! (from version 2) as many mean directions of three f32 each, then (from version 3) the
-//! direct-light grid (`DirectGrid::write`), all little-endian. Version 1 files (no
-//! directions: the direct light is then taken as isotropic), version 2 files (no grid: guided
-//! flights then draw no extra collisions for delta lights) and bare guiding-crate fields
-//! (another tool's, or an older `zerovar train`'s, without a table) are read too.
+//! direct-light grid (`DirectGrid::write`), then (from version 4) the bounds of the scene it
+//! was trained on (six f32, the lower corner first), all little-endian, and nothing after.
+//! Version 1 files (no directions: the direct light is then taken as isotropic), version 2
+//! files (no grid: guided flights then draw no extra collisions for delta lights), version 3
+//! files (no bounds: any scene takes them) and bare guiding-crate fields (another tool's, or an
+//! older `zerovar train`'s, without a table) are read too.
 
 use super::{DirectFluence, DirectGrid};
+use crate::math::Aabb;
 use std::io::{Read, Write};
 use zerovar_guiding::{Field, GuidingError};
 
 /// The first bytes of a trained-field file.
 pub const TRAINED_MAGIC: [u8; 8] = *b"ZVTRAIN\0";
 /// Version of the trained-field layout.
-pub const TRAINED_VERSION: u32 = 3;
+pub const TRAINED_VERSION: u32 = 4;
 
 /// A trained guiding field and what the renderer learned beside it.
 #[derive(Clone, Debug)]
@@ -26,6 +29,9 @@ pub struct TrainedField {
     pub field: Field,
     /// Per region, the fluence next-event estimation collects; `None` for a bare field.
     pub direct: Option<DirectFluence>,
+    /// The bounds of the scene it was trained on (`Scene::bounds`), which a render checks;
+    /// `None` for files before version 4 and bare fields.
+    pub scene_bounds: Option<Aabb>,
 }
 
 impl TrainedField {
@@ -52,6 +58,10 @@ impl TrainedField {
             Some(d) => d.grid.write(&mut w)?,
             None => DirectGrid::default().write(&mut w)?,
         }
+        let bounds = self.scene_bounds.unwrap_or(Aabb::EMPTY);
+        for c in bounds.min.to_array().into_iter().chain(bounds.max.to_array()) {
+            w.write_all(&c.to_le_bytes())?;
+        }
         w.flush()?;
         Ok(())
     }
@@ -62,7 +72,7 @@ impl TrainedField {
         r.read_exact(&mut magic).map_err(|_| GuidingError::BadMagic)?;
         if magic == zerovar_guiding::MAGIC {
             let field = Field::load(std::io::Cursor::new(magic).chain(r))?;
-            return Ok(Self { field, direct: None });
+            return Ok(Self { field, direct: None, scene_bounds: None });
         }
         if magic != TRAINED_MAGIC {
             return Err(GuidingError::BadMagic);
@@ -105,7 +115,46 @@ impl TrainedField {
         }
         let grid = if found >= 3 { DirectGrid::read(&mut r)? } else { DirectGrid::default() };
         let direct = (count > 0).then_some(DirectFluence { values, axes, grid });
-        Ok(Self { field, direct })
+        let scene_bounds = if found >= 4 {
+            let mut c = [0.0f32; 6];
+            for x in &mut c {
+                *x = f32::from_le_bytes(read_array(&mut r)?);
+            }
+            let b = Aabb {
+                min: glam::Vec3A::from_slice(&c[..3]),
+                max: glam::Vec3A::from_slice(&c[3..]),
+            };
+            // The empty box (no shapes) holds infinities; anything else must be finite.
+            let a_box = b.min.is_finite() && b.max.is_finite() && b.min.cmple(b.max).all();
+            if !(a_box || b == Aabb::EMPTY) {
+                return Err(GuidingError::Decode(format!("scene bounds {c:?} are not a box")));
+            }
+            Some(b)
+        } else {
+            None
+        };
+        // A file that goes on (another version's layout under this number, or appended data)
+        // is not what it claims to be.
+        let mut rest = [0u8; 1];
+        if r.read(&mut rest).is_ok_and(|n| n > 0) {
+            return Err(GuidingError::Decode(format!(
+                "data after the end of a version {found} field: the file is corrupt, or its version was altered"
+            )));
+        }
+        Ok(Self { field, direct, scene_bounds })
+    }
+
+    /// Whether the field was trained on a scene with `bounds` (within rounding), or does not
+    /// know its scene.
+    pub fn fits(&self, bounds: &Aabb) -> bool {
+        let Some(trained) = self.scene_bounds else { return true };
+        if trained.is_empty() || bounds.is_empty() {
+            return trained.is_empty() == bounds.is_empty();
+        }
+        let extent = (trained.max - trained.min).max(bounds.max - bounds.min).max_element();
+        let tolerance = 1e-4 * extent.max(1e-6);
+        (trained.min - bounds.min).abs().max_element() <= tolerance
+            && (trained.max - bounds.max).abs().max_element() <= tolerance
     }
 }
 
@@ -146,7 +195,8 @@ mod tests {
             })
             .collect();
         let direct = DirectFluence::build(&field, &records);
-        TrainedField { field, direct: Some(direct) }
+        let scene_bounds = Some(Aabb::from_points(Vec3A::splat(-1.0), Vec3A::new(1.0, 2.0, 3.0)));
+        TrainedField { field, direct: Some(direct), scene_bounds }
     }
 
     #[test]
@@ -174,9 +224,24 @@ mod tests {
         assert_eq!(back.direct.as_ref().unwrap().grid, t.direct.as_ref().unwrap().grid);
         assert!(back.direct.as_ref().unwrap().grid.fluence(Vec3A::splat(0.5)) > 0.0);
         assert_eq!(back.field.regions().len(), t.field.regions().len());
+        assert_eq!(back.scene_bounds, t.scene_bounds);
         let mut grid = Vec::new();
         t.direct.as_ref().unwrap().grid.write(&mut grid).unwrap();
-        let n = bytes.len() - grid.len();
+        // The grid, then the bounds.
+        let n = bytes.len() - grid.len() - 24;
+        // A version 3 file (no bounds) loads, fitting any scene.
+        let mut v3 = bytes[..bytes.len() - 24].to_vec();
+        v3[8..12].copy_from_slice(&3u32.to_le_bytes());
+        let back = TrainedField::load(&v3[..]).unwrap();
+        assert!(back.scene_bounds.is_none() && back.fits(&Aabb::EMPTY));
+        // Relabelled to an older version, or with data appended, a file is refused.
+        let mut relabelled = bytes.clone();
+        relabelled[8..12].copy_from_slice(&3u32.to_le_bytes());
+        let e = TrainedField::load(&relabelled[..]).unwrap_err().to_string();
+        assert!(e.contains("after the end"), "{e}");
+        let mut appended = bytes.clone();
+        appended.push(0);
+        assert!(TrainedField::load(&appended[..]).is_err());
         // A version 2 file (no grid) loads without one.
         let mut v2 = bytes[..n].to_vec();
         v2[8..12].copy_from_slice(&2u32.to_le_bytes());
@@ -202,7 +267,12 @@ mod tests {
         // The last value, then the last direction's last component, then the grid's last cell
         // and its scale.
         let last_value = n - 12 * t.field.regions().len() - 4;
-        let cells = [(last_value, "fluence"), (n - 4, "direction"), (bytes.len() - 4, "grid")];
+        let cells = [
+            (last_value, "fluence"),
+            (n - 4, "direction"),
+            (bytes.len() - 28, "grid"),
+            (bytes.len() - 4, "bounds"),
+        ];
         for (at, what) in cells.into_iter().chain([(n + 12, "grid")]) {
             let mut bad = bytes.clone();
             bad[at..at + 4].copy_from_slice(&f32::NAN.to_le_bytes());
@@ -214,5 +284,17 @@ mod tests {
         bad[n - 4..n].copy_from_slice(&2.0f32.to_le_bytes());
         assert!(TrainedField::load(&bad[..]).unwrap_err().to_string().contains("direction"));
         assert!(matches!(TrainedField::load(&b"not a field"[..]), Err(GuidingError::BadMagic)));
+    }
+
+    #[test]
+    fn a_field_fits_the_scene_it_was_trained_on_only() {
+        let t = trained();
+        let own = t.scene_bounds.unwrap();
+        assert!(t.fits(&own));
+        let nudged = Aabb { max: own.max + Vec3A::splat(1e-6), ..own };
+        assert!(t.fits(&nudged), "rounding is not another scene");
+        let other = Aabb { max: own.max * 2.0, ..own };
+        assert!(!t.fits(&other));
+        assert!(!t.fits(&Aabb::EMPTY));
     }
 }

@@ -116,6 +116,16 @@ pub enum RenderError {
     /// The guiding field rejected its settings or its training samples.
     #[error("guiding: {0}")]
     Guiding(#[from] GuidingError),
+    /// A saved field trained on another scene (its bounds differ).
+    #[error(
+        "the field was trained on a scene with bounds {trained}, not this scene's {scene}; train a field for this scene with `zerovar train`"
+    )]
+    ForeignField {
+        /// The bounds of the scene the field was trained on.
+        trained: String,
+        /// This scene's bounds.
+        scene: String,
+    },
 }
 
 /// Renders `scene`, training a field first when guiding is on; `progress` reports and may
@@ -276,6 +286,13 @@ pub fn render_with_field(
     trained: &TrainedField,
     progress: &Progress<'_>,
 ) -> Result<RenderResult, RenderError> {
+    if !trained.fits(&scene.bounds()) {
+        let b = |a: crate::math::Aabb| format!("{:?} .. {:?}", a.min.to_array(), a.max.to_array());
+        return Err(RenderError::ForeignField {
+            trained: trained.scene_bounds.map_or_else(String::new, b),
+            scene: b(scene.bounds()),
+        });
+    }
     in_pool(options, |threads| {
         let progress = &Monitor::new(progress);
         let guidance = Guidance {
@@ -297,7 +314,8 @@ pub fn train(
     in_pool(options, |_| {
         let progress = &Monitor::new(progress);
         let (field, direct, _, report) = train_in_pool(scene, options, progress)?;
-        Ok((TrainedField { field, direct: Some(direct) }, report))
+        let scene_bounds = Some(scene.bounds());
+        Ok((TrainedField { field, direct: Some(direct), scene_bounds }, report))
     })
 }
 

@@ -620,6 +620,14 @@ fn validate(a: RenderArgs) -> Result<RenderCommand> {
             "--parallax: a saved field keeps the setting it was trained with; give --parallax to `zerovar train`"
         );
     }
+    // With a saved field nothing trains: a training setting would be ignored.
+    for key in ["train-share", "train-passes", "train-time", "training-images"] {
+        if a.field.is_some() && a.guiding.given(key).is_some() {
+            bail!(
+                "--{key}: rendering with --field trains nothing; leave it out, or give it to `zerovar train`"
+            );
+        }
+    }
     if let Some(f) = &a.field
         && !f.is_file()
     {
@@ -678,7 +686,8 @@ fn run_render(c: RenderCommand) -> Result<()> {
                 .with_context(|| format!("{}: cannot open the field", path.display()))?;
             let trained = TrainedField::load(std::io::BufReader::new(file))
                 .with_context(|| format!("{}: cannot load the field", path.display()))?;
-            render_with_field(&scene, &options, &trained, &report)?
+            render_with_field(&scene, &options, &trained, &report)
+                .with_context(|| format!("--field {}", path.display()))?
         }
         None => render(&scene, &options, &report)?,
     };
