@@ -431,6 +431,13 @@ fn bad_input_names_the_place_and_the_fix() {
             "area.xml:5:5",
             &["inside the <shape>"],
         ),
+        (
+            "width",
+            "<float name=\"fov\" value=\"40\"/>",
+            "<float name=\"fov\" value=\"40\"/><film type=\"hdrfilm\"><integer name=\"width\" value=\"4294967312\"/></film>",
+            "width.xml:3:39",
+            &["width 4294967312 must be between 1 and 32768 pixels"],
+        ),
     ];
     let sky = "<emitter type=\"constant\"/>";
     let e = xml("sky.xml", &GOOD.replace("</scene>", &format!("{sky}\n{sky}\n</scene>")), &[]);

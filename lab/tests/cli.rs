@@ -159,7 +159,27 @@ fn bad_scenes_fail_clearly() {
         (
             "wide.toml",
             GOOD.replace("resolution = [8, 6]", "resolution = [40000, 1]"),
-            vec!["wide.toml:", "between 1 and 32768 per axis"],
+            vec!["wide.toml:", "between 1 and 32768 pixels per axis"],
+        ),
+        (
+            "wrapped.toml",
+            GOOD.replace("resolution = [8, 6]", "resolution = [4294967312, 6]"),
+            vec!["wrapped.toml:", "[4294967312, 6] must be between 1 and 32768"],
+        ),
+        (
+            "far.toml",
+            GOOD.replace("origin = [0, 0, 4]", "origin = [1e20, 0, 4]"),
+            vec!["far.toml:", "[1e20, 0.0, 4.0] lies beyond +-1e15", "nearer the origin"],
+        ),
+        (
+            "twocolour.toml",
+            GOOD.replace("irradiance = 1", "irradiance = [1, 2]"),
+            vec!["twocolour.toml:", "a colour has three channels [r, g, b]", "not 2"],
+        ),
+        (
+            "textcolour.toml",
+            GOOD.replace("irradiance = 1", "irradiance = \"bright\""),
+            vec!["textcolour.toml:", "\"bright\"", "one number, or three in brackets"],
         ),
     ];
     for (name, text, needles) in cases {
@@ -184,6 +204,16 @@ fn bad_volume_files_fail_clearly() {
         let scene = write(&format!("{name}.toml"), GOOD.replace("cloud.vol", name));
         assert_fails(&scene, &[name, needle, "media.cloud"]);
     }
+    // A density times its scale beyond single precision would give an infinite majorant.
+    write("dense.vol", vol(&[0.5, 4.0, 0.2, 0.0]));
+    let scene = write(
+        "dense.toml",
+        GOOD.replace("cloud.vol", "dense.vol").replace("scale = 2", "scale = 1e38"),
+    );
+    assert_fails(
+        &scene,
+        &["dense.toml", "media.cloud", "largest density 4 times the extinction", "overflows"],
+    );
 }
 
 #[test]

@@ -23,23 +23,41 @@ use std::path::{Path, PathBuf};
 /// (training passes, the render phase), so 2^25 pixels stay within a few gigabytes.
 const MAX_PIXELS: u64 = 1 << 25;
 
+/// The most pixels along either side of the image.
+pub(crate) const MAX_SIDE: i64 = 1 << 15;
+
+/// The largest coordinate a camera's origin or target may have: a ray's squared length
+/// overflows single precision near 1.8e19, and far below that the scene cannot be resolved.
+const MAX_COORDINATE: f32 = 1e15;
+
 /// The camera, its placement and resolution checked.
 fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
     cx.finite(
         "camera origin, target and up",
         &[cam.origin, cam.target, cam.up].map(|v| v.to_array()).concat(),
     )?;
+    let far = [cam.origin, cam.target].into_iter().find(|p| p.abs().max_element() > MAX_COORDINATE);
+    if let Some(p) = far {
+        return cx.err(format!(
+            "camera point {:?} lies beyond +-{MAX_COORDINATE:e}, where single-precision ray \
+             arithmetic overflows; move the scene nearer the origin",
+            p.to_array()
+        ));
+    }
     let Some(to_world) = Transform::look_at(cam.origin, cam.target, cam.up) else {
         return cx.err("origin equals target, or up is parallel to the view direction");
     };
     if !(cam.fov > 0.0 && cam.fov < 180.0) {
         return cx.err(format!("fov {} must lie strictly between 0 and 180 degrees", cam.fov));
     }
-    if cam.resolution.contains(&0) || cam.resolution.iter().any(|&r| r > 1 << 15) {
-        return cx
-            .err(format!("resolution {:?} must be between 1 and 32768 per axis", cam.resolution));
+    if cam.resolution.iter().any(|r| !(1..=MAX_SIDE).contains(r)) {
+        return cx.err(format!(
+            "resolution {:?} must be between 1 and {MAX_SIDE} pixels per axis",
+            cam.resolution
+        ));
     }
-    let pixels = u64::from(cam.resolution[0]) * u64::from(cam.resolution[1]);
+    let resolution = cam.resolution.map(|r| r as u32);
+    let pixels = u64::from(resolution[0]) * u64::from(resolution[1]);
     if pixels > MAX_PIXELS {
         return cx.err(format!(
             "resolution {:?} is {pixels} pixels, more than {MAX_PIXELS} (8192 x 4096): a render holds \
@@ -47,7 +65,7 @@ fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
             cam.resolution
         ));
     }
-    Ok(Camera::new(to_world, cam.fov, cam.fov_axis, cam.resolution))
+    Ok(Camera::new(to_world, cam.fov, cam.fov_axis, resolution))
 }
 
 /// The file being built and the element being looked at, for error messages.
@@ -482,6 +500,15 @@ fn medium(cx: &Ctx<'_>, name: &str, d: &MediumDesc) -> Result<Medium> {
                 return cx.err(format!(
                     "albedo grid holds {} > 1; an albedo lies in [0, 1]",
                     g.max_value()
+                ));
+            }
+            let peak = density.max_value() * (sigma_t * tint).max_element();
+            if !peak.is_finite() {
+                return cx.err(format!(
+                    "the grid's largest density {} times the extinction {} overflows single \
+                     precision; lower the scale or the extinction",
+                    density.max_value(),
+                    (sigma_t * tint).max_element()
                 ));
             }
             let to_world = cx.transform(&d.transform)?;

@@ -125,7 +125,7 @@ impl CameraDesc {
             up: Vec3::Y,
             fov,
             fov_axis: Default::default(),
-            resolution,
+            resolution: resolution.map(i64::from),
             medium: None,
         }
     }

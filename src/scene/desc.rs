@@ -11,13 +11,55 @@ use std::collections::BTreeMap;
 use toml::Spanned;
 
 /// A colour: one number for grey or `[r, g, b]`.
-#[derive(Clone, Copy, Debug, Deserialize, PartialEq)]
-#[serde(untagged)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Rgb {
     /// The same value in every channel.
     Grey(f32),
     /// Red, green, blue.
     Rgb([f32; 3]),
+}
+
+impl<'de> Deserialize<'de> for Rgb {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        d.deserialize_any(RgbVisitor)
+    }
+}
+
+/// Reads a colour, saying what a colour is when the value is not one.
+struct RgbVisitor;
+
+impl<'de> serde::de::Visitor<'de> for RgbVisitor {
+    type Value = Rgb;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("a colour: one number, or three in brackets [r, g, b]")
+    }
+
+    fn visit_f64<E: serde::de::Error>(self, v: f64) -> Result<Rgb, E> {
+        Ok(Rgb::Grey(v as f32))
+    }
+
+    fn visit_i64<E: serde::de::Error>(self, v: i64) -> Result<Rgb, E> {
+        Ok(Rgb::Grey(v as f32))
+    }
+
+    fn visit_u64<E: serde::de::Error>(self, v: u64) -> Result<Rgb, E> {
+        Ok(Rgb::Grey(v as f32))
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Rgb, A::Error> {
+        let mut c = Vec::with_capacity(3);
+        while let Some(v) = seq.next_element::<f64>()? {
+            c.push(v as f32);
+        }
+        match c[..] {
+            [r, g, b] => Ok(Rgb::Rgb([r, g, b])),
+            _ => Err(serde::de::Error::custom(format!(
+                "a colour has three channels [r, g, b] (or is one number), not {}",
+                c.len()
+            ))),
+        }
+    }
 }
 
 impl Rgb {
@@ -91,8 +133,8 @@ pub struct CameraDesc {
     /// Axis the field of view spans: "x" (default) or "y".
     #[serde(default)]
     pub fov_axis: crate::camera::FovAxis,
-    /// Width and height in pixels.
-    pub resolution: [u32; 2],
+    /// Width and height in pixels (checked when the scene is built).
+    pub resolution: [i64; 2],
     /// Medium around the camera (default: the global medium).
     pub medium: Option<String>,
 }

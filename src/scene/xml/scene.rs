@@ -7,6 +7,7 @@ use super::props::Props;
 use super::tree::{Object, Value};
 use super::{Conv, Result, compose, spanned};
 use crate::camera::FovAxis;
+use crate::scene::build::MAX_SIDE;
 use crate::scene::desc::{CameraDesc, LightDesc, RenderDesc, SceneDesc, TransformStep};
 use glam::Vec3;
 use std::rc::Rc;
@@ -175,15 +176,16 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
     Ok((spanned(&o.pos, camera), render))
 }
 
-fn film(o: &Rc<Object>) -> Result<[u32; 2]> {
+fn film(o: &Rc<Object>) -> Result<[i64; 2]> {
     let p = Props::new(o);
     if o.kind != "hdrfilm" {
         return Err(p.err("zerovar has only the `hdrfilm` film"));
     }
-    let size = |name: &'static str, default: u32| -> Result<u32> {
+    let size = |name: &'static str, default: i64| -> Result<i64> {
         match p.integer(name)? {
             None => Ok(default),
-            Some(v) => u32::try_from(v).map_err(|_| p.err(format!("{name} {v} must be positive"))),
+            Some(v) if (1..=MAX_SIDE).contains(&v) => Ok(v),
+            Some(v) => Err(p.err(format!("{name} {v} must be between 1 and {MAX_SIDE} pixels"))),
         }
     };
     let resolution = [size("width", 768)?, size("height", 576)?];
