@@ -427,7 +427,7 @@ fn final_phase(
         count,
         field: guidance.as_ref().map(|g| (g.field, g.direct)),
         estimate: guidance.as_ref().and_then(|g| g.estimate.as_deref()),
-        record: false,
+        record: 0,
         guided_tiles: guidance.as_ref().and_then(|g| g.guided_tiles.as_deref()),
         largest: options.fireflies > 0,
     };

@@ -27,8 +27,9 @@ pub(super) struct Pass<'a> {
     pub(super) field: Option<(&'a Field, Option<&'a DirectFluence>)>,
     /// Per-pixel estimates for weight windows (`window::floor` is added when rendering).
     pub(super) estimate: Option<&'a [f32]>,
-    /// Record training samples (splitting is then off).
-    pub(super) record: bool,
+    /// Samples per pixel, the pass's first, whose paths are recorded as training samples
+    /// (splitting is then off); 0 records none.
+    pub(super) record: u32,
     /// Per tile, whether it is guided; `None` guides every tile as `settings` say.
     pub(super) guided_tiles: Option<&'a [bool]>,
     /// Keep each pixel's largest sample (for the firefly diagnostic).
@@ -154,7 +155,7 @@ pub(super) fn with_tile_walk<W: TileWork>(
     let guided = pass.guided_tiles.is_none_or(|g| g[index]);
     match pass.field {
         Some((f, direct)) if guided => {
-            let mut cache = FieldCache::with_direct(f, direct, pass.record);
+            let mut cache = FieldCache::with_direct(f, direct, pass.record > 0);
             let out = work.run(pass.settings, &mut cache);
             (out, cache.take_records())
         }
@@ -207,10 +208,11 @@ impl TileWork for RenderTile<'_, '_> {
                 let (mut sum, mut odd) = (PixelSum::default(), PixelSum::default());
                 let mut largest = Largest::default();
                 for s in pass.first..pass.first + pass.count {
+                    let record = s - pass.first < pass.record;
                     let mut ctx = WalkContext {
                         cache: &mut *cache,
                         pixel: pass.estimate.map(|e| e[(y * w + x) as usize] + floor),
-                        recorder: if pass.record { Some(&mut recorder) } else { None },
+                        recorder: if record { Some(&mut recorder) } else { None },
                         trace: None,
                     };
                     let l = camera_sample(
@@ -225,7 +227,7 @@ impl TileWork for RenderTile<'_, '_> {
                     let finite = is_finite(l);
                     if finite {
                         largest.offer(l, s);
-                        if pass.record {
+                        if record {
                             recorder.finish(&mut out.samples);
                         }
                     } else {

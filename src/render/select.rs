@@ -165,7 +165,7 @@ pub(super) fn pilot(
             count: if part == 0 { half } else { count - half },
             field: (k > 0).then_some((guidance.field, guidance.direct)),
             estimate: guidance.estimate.as_deref(),
-            record: false,
+            record: 0,
             guided_tiles: None,
             largest: false,
         };

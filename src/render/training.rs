@@ -105,6 +105,12 @@ pub(super) fn spend(options: &mut RenderOptions, seconds: f64) {
     }
 }
 
+/// The most path vertices one training pass records (about 90 bytes each with its
+/// direct-light record): a pass of more records only its first samples per pixel, so memory
+/// stays bounded whatever the resolution and the number of passes. Far above what a field
+/// needs to learn from (a few million samples a pass).
+pub(super) const MAX_RECORDED_VERTICES: u64 = 1 << 24;
+
 /// Training passes: 1, 2, 4, ... spp, each guided by the field so far, the field updated with
 /// its samples after each. Returns the field, its direct fluence (from the last pass), the
 /// passes' films and a report.
@@ -126,6 +132,8 @@ pub(super) struct Training {
     pub(super) films: Vec<Film>,
     pub(super) spp: u32,
     pub(super) samples: u64,
+    /// Camera paths whose vertices were recorded (`samples` of them).
+    recorded_paths: u64,
     /// Seconds spent in training passes and in adaptive guiding's early pilot.
     pub(super) seconds: f64,
     /// Whether the budget is spent.
@@ -146,6 +154,7 @@ impl Training {
             films: Vec::new(),
             spp: 0,
             samples: 0,
+            recorded_paths: 0,
             seconds: 0.0,
             done: false,
             stop: TrainingStop::Budget,
@@ -181,6 +190,7 @@ impl Training {
             // Each pass draws from its own streams, independent of the render phase's.
             let seed = mix64(options.seed ^ (0x7261_696E_0000 + pass as u64));
             let pass_start = Instant::now();
+            let record = self.recorded_spp(count, pixels);
             let spec = Pass {
                 settings: &settings,
                 seed,
@@ -188,7 +198,7 @@ impl Training {
                 count,
                 field: Some((&self.field, Some(&self.direct))),
                 estimate: estimate.as_deref(),
-                record: true,
+                record,
                 guided_tiles: None,
                 largest: false,
             };
@@ -198,6 +208,7 @@ impl Training {
             self.field.update(&out.samples)?;
             self.direct = DirectFluence::build(&self.field, &out.records);
             self.samples += out.samples.len() as u64;
+            self.recorded_paths += u64::from(record) * pixels;
             self.spp += count;
             self.films.push(film);
             let pass_seconds = pass_start.elapsed().as_secs_f64();
@@ -232,6 +243,16 @@ impl Training {
         Ok(())
     }
 
+    /// How many of a pass's `count` samples per pixel to record: all of them unless the
+    /// vertices they would hold, at the recorded paths' mean length so far, pass
+    /// [`MAX_RECORDED_VERTICES`]; at least one.
+    fn recorded_spp(&self, count: u32, pixels: u64) -> u32 {
+        let paths = self.recorded_paths;
+        let per_path = if paths > 0 { (self.samples as f64 / paths as f64).max(1.0) } else { 1.0 };
+        let fits = MAX_RECORDED_VERTICES as f64 / (per_path * pixels.max(1) as f64);
+        count.min(fits.max(1.0) as u32)
+    }
+
     /// The field so far, as the render phase would use it.
     pub(super) fn guidance(&self) -> Guidance<'_> {
         Guidance {
@@ -264,6 +285,24 @@ mod tests {
     use super::*;
     use crate::render::{Budget, OptionsError, RenderOptions, TrainBudget};
     use zerovar_guiding::FieldConfig;
+
+    /// A pass records all its samples while they fit the vertex budget at the recorded paths'
+    /// mean length, and only its first samples per pixel beyond: memory stays bounded however
+    /// many passes double the samples.
+    #[test]
+    fn training_records_a_bounded_number_of_vertices_per_pass() {
+        let options = RenderOptions::unguided(Budget::Samples(64), 0);
+        let mut t = Training::new(&options).unwrap();
+        let pixels = 256;
+        assert_eq!(t.recorded_spp(1, pixels), 1);
+        // Paths of 4 vertices so far: 2^24 / (4 x 256) = 16384 samples per pixel fit.
+        (t.recorded_paths, t.samples) = (1000, 4000);
+        assert_eq!(t.recorded_spp(8192, pixels), 8192);
+        assert_eq!(t.recorded_spp(1 << 19, pixels), 16384);
+        // Never none, however long the paths.
+        t.samples = u64::MAX / 2;
+        assert_eq!(t.recorded_spp(1 << 19, pixels), 1);
+    }
 
     fn timed(budget: f64, train: TrainBudget) -> RenderOptions {
         let mut options = RenderOptions::unguided(Budget::Time(Duration::from_secs_f64(budget)), 0);
