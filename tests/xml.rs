@@ -733,3 +733,28 @@ fn rotation_about_a_non_unit_axis_is_mitsubas_matrix() {
         "{b:?}"
     );
 }
+
+/// Mitsuba's depth counting at its ends: `max_depth` 0 renders black, 1 shows only what the
+/// camera sees emit (the area light), 2 adds its direct light on the walls.
+#[test]
+fn max_depth_zero_is_black_and_one_is_emitters_only() {
+    let text = std::fs::read_to_string(repo("tests/data/mitsuba/k-fog-room-walls.xml")).unwrap();
+    let mean = |depth: u32| {
+        let t = text.replace(
+            "<integer name=\"max_depth\" value=\"8\"/>",
+            &format!("<integer name=\"max_depth\" value=\"{depth}\"/>"),
+        );
+        assert_ne!(t, text);
+        let s = xml(&format!("depth{depth}.xml"), &t, &[]).unwrap();
+        let img = image(&s, 3);
+        (
+            img.iter().map(|p| p[0]).sum::<f32>() / img.len() as f32,
+            img.iter().filter(|p| p[0] > 0.0).count(),
+        )
+    };
+    let (zero, one, two) = (mean(0), mean(1), mean(2));
+    assert_eq!(zero, (0.0, 0), "max_depth 0 must render black");
+    // The light's own radiance in the pixels that see it, nothing elsewhere.
+    assert!(one.0 > 0.0 && one.1 < 20, "max_depth 1: {one:?}");
+    assert!(two.0 > one.0 && two.1 > 300, "max_depth 2: {two:?}");
+}

@@ -140,13 +140,18 @@ pub fn radiance<C: RadianceCache>(
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Spectrum {
+    counters.paths += 1;
+    // Mitsuba's depth counting: at most 0 scattering events, and not even the camera ray's
+    // first hit counts.
+    if settings.max_depth == Some(0) {
+        return Spectrum::ZERO;
+    }
     let prev = Previous { position: ray.origin, pdf: 1.0, delta: true };
     let state =
         PathState { ray, medium, beta: Spectrum::ONE, eta: 1.0, depth: 0, prev, guided_gain: 1.0 };
     let mut branches = Branches { stack: ArrayVec::new(), walks: 1 };
     branches.stack.push(state);
     let mut l = Spectrum::ZERO;
-    counters.paths += 1;
     let mut index = 0;
     while let Some(state) = branches.stack.pop() {
         counters.walks += 1;
