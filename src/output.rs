@@ -50,58 +50,71 @@ pub enum OutputError {
 /// exhaust memory, and it is far above any environment map or reference a render needs.
 pub const MAX_EXR_PIXELS: usize = 1 << 27;
 
-/// Refuses a file whose header claims more than [`MAX_EXR_PIXELS`] pixels in a layer.
-fn check_exr_size(path: &Path) -> Result<(), OutputError> {
-    let fail = |message: String| OutputError::Read { path: path.display().to_string(), message };
-    crate::files::check(path).map_err(|e| fail(e.to_string()))?;
-    let meta = exr::meta::MetaData::read_from_file(path, false).map_err(|e| fail(e.to_string()))?;
+/// Refuses an EXR whose header claims more than [`MAX_EXR_PIXELS`] pixels in a layer.
+fn check_exr_size(bytes: &[u8]) -> Result<(), String> {
+    let meta = exr::meta::MetaData::read_from_buffered(bytes, false).map_err(|e| e.to_string())?;
     for header in &meta.headers {
         let (w, h) = (header.layer_size.width(), header.layer_size.height());
         if w.checked_mul(h).is_none_or(|n| n > MAX_EXR_PIXELS) {
-            return Err(fail(format!(
+            return Err(format!(
                 "its header claims {w} x {h} pixels, more than the {MAX_EXR_PIXELS} zerovar reads; the file is corrupt, or give a smaller image"
-            )));
+            ));
         }
     }
     Ok(())
 }
 
+/// An EXR image: width, height, row-major RGB pixels and, where the file has a layer named
+/// `stderr` (as `zerovar reference` writes), its per-pixel standard errors.
+pub type ExrImage = (usize, usize, Vec<[f32; 3]>, Option<Vec<[f32; 3]>>);
+
 /// Reads the first RGB(A) layer of an EXR file as row-major pixels: (width, height, pixels).
 pub fn read_exr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), OutputError> {
-    check_exr_size(path)?;
-    let exr_error = |e: exr::error::Error| OutputError::Read {
-        path: path.display().to_string(),
-        message: e.to_string(),
-    };
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
-        |(w, px), pos, (r, g, b, _a): (f32, f32, f32, f32)| px[pos.y() * *w + pos.x()] = [r, g, b],
-    )
-    .map_err(exr_error)?;
-    let (w, pixels) = image.layer_data.channel_data.pixels;
-    Ok((w, pixels.len() / w.max(1), pixels))
+    let (w, h, pixels, _) = read_exr_with_error(path)?;
+    Ok((w, h, pixels))
 }
 
 /// Reads an EXR file's image and, if it has one (as `zerovar reference` writes), its layer
-/// named `stderr`: (width, height, pixels, standard errors). The image is the first RGB(A)
-/// layer not named `stderr`; a file with layers that are not RGB (AOVs, depth) gives its
-/// first RGB layer and no standard error.
-#[allow(clippy::type_complexity)]
-pub fn read_exr_with_error(
-    path: &Path,
-) -> Result<(usize, usize, Vec<[f32; 3]>, Option<Vec<[f32; 3]>>), OutputError> {
-    check_exr_size(path)?;
+/// named `stderr`. The image is the first RGB(A) layer not named `stderr`; a file with layers
+/// that are not RGB (AOVs, depth) gives its first RGB layer and no standard error.
+pub fn read_exr_with_error(path: &Path) -> Result<ExrImage, OutputError> {
     let fail = |message: String| OutputError::Read { path: path.display().to_string(), message };
-    let Ok(image) = exr::prelude::read_all_rgba_layers_from_file(
-        path,
-        |res, _| (res.width(), vec![[0.0f32; 3]; res.width() * res.height()]),
-        |(w, px): &mut (usize, Vec<[f32; 3]>), pos, (r, g, b, _a): (f32, f32, f32, f32)| {
-            px[pos.y() * *w + pos.x()] = [r, g, b]
-        },
-    ) else {
-        let (w, h, pixels) = read_exr(path)?;
-        return Ok((w, h, pixels, None));
+    let bytes = crate::files::read(path).map_err(|e| fail(e.to_string()))?;
+    parse_exr(&bytes).map_err(fail)
+}
+
+/// [`read_exr_with_error`] of the bytes of an EXR file: an image or a reason, never a panic,
+/// and no pixel allocated before the header's size is checked.
+pub fn parse_exr(bytes: &[u8]) -> Result<ExrImage, String> {
+    use std::io::Cursor;
+    check_exr_size(bytes)?;
+    use exr::prelude::*;
+    type Pixels = (usize, Vec<[f32; 3]>);
+    fn create(res: Vec2<usize>, _: &RgbaChannels) -> Pixels {
+        (res.width(), vec![[0.0f32; 3]; res.width() * res.height()])
+    }
+    fn set((w, px): &mut Pixels, pos: Vec2<usize>, (r, g, b, _a): (f32, f32, f32, f32)) {
+        px[pos.y() * *w + pos.x()] = [r, g, b];
+    }
+    let all = read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .rgba_channels(create, set)
+        .all_layers()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes));
+    let Ok(image) = all else {
+        // Layers that are not all RGB: the first RGB one.
+        let image = read()
+            .no_deep_data()
+            .largest_resolution_level()
+            .rgba_channels(create, set)
+            .first_valid_layer()
+            .all_attributes()
+            .from_buffered(Cursor::new(bytes))
+            .map_err(|e| e.to_string())?;
+        let (w, pixels) = image.layer_data.channel_data.pixels;
+        return Ok((w, pixels.len() / w.max(1), pixels, None));
     };
     let (mut mean, mut error) = (None, None);
     for layer in image.layer_data {
@@ -109,16 +122,16 @@ pub fn read_exr_with_error(
         let slot = if is_error { &mut error } else { &mut mean };
         slot.get_or_insert(layer.channel_data.pixels);
     }
-    let (w, pixels) = mean.ok_or_else(|| fail("no RGB layer besides `stderr`".into()))?;
+    let (w, pixels) = mean.ok_or_else(|| "no RGB layer besides `stderr`".to_string())?;
     let error = error.map(|(_, e)| e);
     if let Some(e) = &error
         && e.len() != pixels.len()
     {
-        return Err(fail(format!(
+        return Err(format!(
             "its `stderr` layer has {} pixels but the image {}; write the reference again with `zerovar reference`",
             e.len(),
             pixels.len()
-        )));
+        ));
     }
     Ok((w, pixels.len() / w.max(1), pixels, error))
 }
