@@ -244,6 +244,13 @@ fn mitsuba_j_envmap_bilinear_seen_directly() {
     validate("j-envmap-bilinear", 1024);
 }
 
+/// A checkerboard on an OBJ quad with texture coordinates asymmetric in v, which Mitsuba
+/// flips by default; a dielectric given by a material's name; a sensor without `fov`.
+#[test]
+fn mitsuba_l_obj_checker_named_ior_default_lens() {
+    validate("l-obj-checker", 1024);
+}
+
 /// Walls that name no medium keep the fog they stand in (zerovar made such walls borders
 /// of vacuum, and rendered bench scenes' rooms 5-18% darker than Mitsuba).
 #[test]

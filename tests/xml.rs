@@ -598,11 +598,14 @@ fn hostile_nesting_includes_and_repeats_are_errors_not_crashes() {
     let e = zerovar::scene::load(&dir.join("l0.xml"), &[]).unwrap_err().to_string();
     assert!(e.contains("more than 1024 <include> elements"), "{e}");
 
-    // A default given twice in the file is an error; -D still overrides the one given once.
+    // A default given twice (an included preamble repeating the scene's) takes its first
+    // value, as Mitsuba 3.9 does (checked with its Python loader); -D still overrides it.
     let twice = "<scene version=\"3.0.0\">\n  <default name=\"spp\" value=\"4\"/>\n  \
-                 <default name=\"spp\" value=\"8\"/>\n</scene>\n";
-    let e = xml("twice.xml", twice, &[]).unwrap_err().to_string();
-    assert!(e.contains("twice.xml:3:3") && e.contains("given twice"), "{e}");
+                 <default name=\"spp\" value=\"8\"/>\n  <sensor type=\"perspective\">\n    \
+                 <float name=\"fov\" value=\"40\"/>\n    <sampler type=\"independent\">\
+                 <integer name=\"sample_count\" value=\"$spp\"/></sampler>\n  </sensor>\n</scene>\n";
+    assert_eq!(xml("twice.xml", twice, &[]).unwrap().settings().spp, 4);
+    assert_eq!(xml("twice.xml", twice, &[("spp", "16")]).unwrap().settings().spp, 16);
 }
 
 /// As in Mitsuba, an emitting shape without a `<bsdf>` reflects nothing (a black diffuse
@@ -757,4 +760,68 @@ fn max_depth_zero_is_black_and_one_is_emitters_only() {
     // The light's own radiance in the pixels that see it, nothing elsewhere.
     assert!(one.0 > 0.0 && one.1 < 20, "max_depth 1: {one:?}");
     assert!(two.0 > one.0 && two.1 > 300, "max_depth 2: {two:?}");
+}
+
+/// A sensor without `fov` takes Mitsuba's 50 mm lens on 36 x 24 mm film (or `focal_length`),
+/// its field of view along the image's diagonal: the horizontal angles are Mitsuba 3.9's own
+/// `x_fov` for these films.
+#[test]
+fn focal_lengths_give_mitsubas_fields_of_view() {
+    for (w, h, focal, x_fov) in [
+        (48, 48, "", 34.022_057),
+        (48, 48, "35mm", 47.216_316),
+        (64, 32, "", 42.311_714),
+        (30, 60, "35mm", 30.903_755),
+    ] {
+        let lens = if focal.is_empty() {
+            String::new()
+        } else {
+            format!("<string name=\"focal_length\" value=\"{focal}\"/>")
+        };
+        let text = format!(
+            "<scene version=\"3.0.0\"><sensor type=\"perspective\">{lens}<film type=\"hdrfilm\">\
+             <integer name=\"width\" value=\"{w}\"/><integer name=\"height\" value=\"{h}\"/>\
+             </film></sensor><shape type=\"sphere\"/></scene>"
+        );
+        let s = xml("lens.xml", &text, &[]).unwrap();
+        let centre = s.camera().ray(Vec2::new(w as f32 / 2.0, h as f32 / 2.0)).direction;
+        let edge = s.camera().ray(Vec2::new(0.0, h as f32 / 2.0)).direction;
+        let half = centre.dot(edge).clamp(-1.0, 1.0).acos().to_degrees();
+        assert!(
+            (2.0 * half - x_fov).abs() < 1e-3,
+            "{w}x{h} {focal:?}: {} against {x_fov}",
+            2.0 * half
+        );
+    }
+    let both = "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\
+                <string name=\"focal_length\" value=\"35mm\"/></sensor></scene>";
+    let e = xml("both.xml", both, &[]).unwrap_err().to_string();
+    assert!(e.contains("either `fov` or `focal_length`"), "{e}");
+    let bad = "<scene version=\"3.0.0\"><sensor type=\"perspective\">\
+               <string name=\"focal_length\" value=\"long\"/></sensor></scene>";
+    let e = xml("lens-bad.xml", bad, &[]).unwrap_err().to_string();
+    assert!(e.contains("focal_length \"long\" is not a length in millimetres"), "{e}");
+}
+
+/// Mitsuba's named indices of refraction, in any case; an unknown name lists the known ones.
+#[test]
+fn named_indices_of_refraction() {
+    use zerovar::bsdf::Bsdf;
+    let glass = |int: &str, ext: &str| {
+        format!(
+            "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\
+             </sensor><shape type=\"sphere\"><bsdf type=\"dielectric\"><string name=\"int_ior\" \
+             value=\"{int}\"/><string name=\"ext_ior\" value=\"{ext}\"/></bsdf></shape></scene>"
+        )
+    };
+    let s = xml("water.xml", &glass("Water", "air"), &[]).unwrap();
+    match s.surfaces()[0].bsdf {
+        Bsdf::Dielectric { eta } => assert!((eta - 1.333 / 1.000_277).abs() < 1e-6, "{eta}"),
+        ref b => panic!("{b:?}"),
+    }
+    let e = xml("unobtainium.xml", &glass("unobtainium", "air"), &[]).unwrap_err().to_string();
+    assert!(
+        e.contains("int_ior \"unobtainium\" is not one of Mitsuba's named") && e.contains("bk7"),
+        "{e}"
+    );
 }

@@ -286,7 +286,11 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
 fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
     let to_world = cx.transform(&d.transform)?;
     let not_sphere = [("center", d.center.is_some()), ("radius", d.radius.is_some())];
-    let not_obj = [("filename", d.filename.is_some()), ("face_normals", d.face_normals.is_some())];
+    let not_obj = [
+        ("filename", d.filename.is_some()),
+        ("face_normals", d.face_normals.is_some()),
+        ("flip_tex_coords", d.flip_tex_coords.is_some()),
+    ];
     match d.kind.as_str() {
         "sphere" => {
             cx.only("spheres", &not_obj)?;
@@ -319,14 +323,15 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
             })
         }
         "obj" | "ply" => {
-            cx.only(&format!("{} meshes", d.kind), &not_sphere)?;
+            let only_obj = [("flip_tex_coords", d.kind == "ply" && d.flip_tex_coords.is_some())];
+            cx.only(&format!("{} meshes", d.kind), &[not_sphere.as_slice(), &only_obj].concat())?;
             let file = cx.file(&cx.required("filename", &d.filename)?);
             if !file.is_file() {
                 return cx.err(format!("{}: no such file", file.display()));
             }
             let face_normals = d.face_normals.unwrap_or(false);
             let mesh = if d.kind == "obj" {
-                Mesh::from_obj(&file, &to_world, face_normals)
+                Mesh::from_obj(&file, &to_world, face_normals, d.flip_tex_coords.unwrap_or(true))
             } else {
                 Mesh::from_ply(&file, &to_world, face_normals)
             };

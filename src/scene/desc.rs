@@ -237,6 +237,8 @@ pub struct ShapeDesc {
     pub filename: Option<String>,
     /// Obj, ply: ignore the file's vertex normals.
     pub face_normals: Option<bool>,
+    /// Obj: turn texture coordinates `(u, v)` into `(u, 1 - v)` (default true, as in Mitsuba).
+    pub flip_tex_coords: Option<bool>,
     /// Transform steps applied in order.
     #[serde(default)]
     pub transform: Vec<TransformStep>,

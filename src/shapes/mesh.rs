@@ -101,11 +101,13 @@ impl Mesh {
         Ok(mesh)
     }
 
-    /// Reads an OBJ file (all objects merged, polygons triangulated).
+    /// Reads an OBJ file (all objects merged, polygons triangulated); `flip_v` turns texture
+    /// coordinates `(u, v)` into `(u, 1 - v)`, as Mitsuba does by default.
     pub fn from_obj(
         path: &Path,
         to_world: &Transform,
         face_normals: bool,
+        flip_v: bool,
     ) -> Result<Self, MeshError> {
         let options =
             tobj::LoadOptions { triangulate: true, single_index: true, ..Default::default() };
@@ -123,7 +125,8 @@ impl Mesh {
             all_have_normals &= mesh.normals.len() == 3 * n;
             all_have_uvs &= mesh.texcoords.len() == 2 * n;
             normals.extend(mesh.normals.chunks_exact(3).map(|c| Vec3A::new(c[0], c[1], c[2])));
-            uvs.extend(mesh.texcoords.chunks_exact(2).map(|c| Vec2::new(c[0], c[1])));
+            let v = |v: f32| if flip_v { 1.0 - v } else { v };
+            uvs.extend(mesh.texcoords.chunks_exact(2).map(|c| Vec2::new(c[0], v(c[1]))));
             indices.extend(
                 mesh.indices.chunks_exact(3).map(|c| [c[0] + base, c[1] + base, c[2] + base]),
             );

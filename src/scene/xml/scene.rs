@@ -115,12 +115,11 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
     if o.kind != "perspective" {
         return Err(p.err("zerovar has only the `perspective` sensor"));
     }
-    let Some(fov) = p.float("fov")? else {
-        return Err(p.err(
-            "give the field of view in degrees as <float name=\"fov\" value=\"...\"/> \
-             (focal_length is not supported)",
-        ));
-    };
+    let fov = p.float("fov")?;
+    let focal_length = p.string("focal_length")?;
+    if fov.is_some() && focal_length.is_some() {
+        return Err(p.err("give either `fov` or `focal_length`, not both (as Mitsuba asks)"));
+    }
     let fov_axis = p.string("fov_axis")?;
     let steps = p.transform("to_world")?.unwrap_or(&[]);
     // Accepted as in Mitsuba; zerovar does not clip.
@@ -137,17 +136,34 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
     };
     p.finish()?;
 
-    let fov_axis = match fov_axis {
-        None | Some(("x", _)) => FovAxis::X,
-        Some(("y", _)) => FovAxis::Y,
-        Some(("smaller", _)) if resolution[0] > resolution[1] => FovAxis::Y,
-        Some(("smaller", _)) => FovAxis::X,
-        Some(("larger", _)) if resolution[0] > resolution[1] => FovAxis::X,
-        Some(("larger", _)) => FovAxis::Y,
-        Some((other, prop)) => {
-            return Err(prop.pos.err(format!(
-                "fov_axis \"{other}\" is not supported; use x, y, smaller or larger"
-            )));
+    let axis = |fov_axis: Option<(&str, &super::tree::Prop)>| match fov_axis {
+        None | Some(("x", _)) => Ok(FovAxis::X),
+        Some(("y", _)) => Ok(FovAxis::Y),
+        Some(("smaller", _)) if resolution[0] > resolution[1] => Ok(FovAxis::Y),
+        Some(("smaller", _)) => Ok(FovAxis::X),
+        Some(("larger", _)) if resolution[0] > resolution[1] => Ok(FovAxis::X),
+        Some(("larger", _)) => Ok(FovAxis::Y),
+        Some((other, prop)) => Err(prop
+            .pos
+            .err(format!("fov_axis \"{other}\" is not supported; use x, y, smaller or larger"))),
+    };
+    let (fov, fov_axis) = match fov {
+        Some(fov) => (fov, axis(fov_axis)?),
+        None => {
+            // Mitsuba's default: a 50 mm lens on a 36 x 24 mm film, its field of view spanning
+            // the image's diagonal (`fov_axis` then does not apply).
+            let (text, pos) = focal_length.map_or(("50mm", &o.pos), |(t, prop)| (t, &prop.pos));
+            let mm = text.strip_suffix("mm").unwrap_or(text).trim().parse::<f64>();
+            let Some(mm) = mm.ok().filter(|v| *v > 0.0 && v.is_finite()) else {
+                return Err(pos.err(format!(
+                    "focal_length \"{text}\" is not a length in millimetres; give it as \"50mm\""
+                )));
+            };
+            let aspect = resolution[0] as f64 / resolution[1] as f64;
+            // The diagonal's tangent span, then the width's.
+            let diagonal = 36.0f64.hypot(24.0) / mm;
+            let width = diagonal / (1.0 + 1.0 / (aspect * aspect)).sqrt();
+            ((2.0 * (0.5 * width).atan()).to_degrees() as f32, FovAxis::X)
         }
     };
     let (origin, target, up) = match steps {

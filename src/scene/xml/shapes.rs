@@ -95,19 +95,13 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
              validated against Mitsuba); use an OBJ mesh or an untextured bsdf",
         ));
     }
-    if o.kind == "obj" && flip_uv && textured {
-        return Err(p.err(
-            "zerovar reads OBJ texture coordinates unflipped while Mitsuba flips them by \
-             default; add <boolean name=\"flip_tex_coords\" value=\"false\"/> to texture this \
-             mesh",
-        ));
-    }
     let desc = ShapeDesc {
         kind: o.kind.clone(),
         center,
         radius,
         filename,
         face_normals,
+        flip_tex_coords: (o.kind == "obj").then_some(flip_uv),
         transform,
         flip_normals,
         bsdf,
@@ -140,16 +134,20 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
             for (name, slot) in [("int_ior", &mut d.int_ior), ("ext_ior", &mut d.ext_ior)] {
                 *slot = match p.raw(name) {
                     None => None,
-                    Some(prop) => match prop.value {
-                        Value::Float(v) => Some(v as f32),
-                        Value::Integer(v) => Some(v as f32),
-                        _ => {
-                            return Err(p.wrong(
-                                prop,
-                                "a <float> (named materials such as \"bk7\" are not supported; \
-                                 give the index)",
-                            ));
-                        }
+                    Some(prop) => match &prop.value {
+                        Value::Float(v) => Some(*v as f32),
+                        Value::Integer(v) => Some(*v as f32),
+                        Value::String(material) => match named_ior(material) {
+                            Some(ior) => Some(ior),
+                            None => {
+                                return Err(prop.pos.err(format!(
+                                    "{name} \"{material}\" is not one of Mitsuba's named \
+                                     materials ({}); give the index as a <float>",
+                                    NAMED_IORS.map(|(n, _)| n).join(", ")
+                                )));
+                            }
+                        },
+                        _ => return Err(p.wrong(prop, "a <float> or a material's name")),
                     },
                 };
             }
@@ -260,4 +258,38 @@ pub(super) fn light(conv: &Conv, o: &Rc<Object>) -> Result<Spanned<LightDesc>> {
     }
     p.finish()?;
     Ok(spanned(&o.pos, d))
+}
+
+/// Mitsuba's table of named indices of refraction (`int_ior="water"`), the values Mitsuba 3
+/// uses.
+const NAMED_IORS: [(&str, f32); 23] = [
+    ("vacuum", 1.0),
+    ("helium", 1.000_036),
+    ("hydrogen", 1.000_132),
+    ("air", 1.000_277),
+    ("carbon dioxide", 1.000_45),
+    ("water", 1.333),
+    ("acetone", 1.36),
+    ("ethanol", 1.361),
+    ("carbon tetrachloride", 1.461),
+    ("glycerol", 1.4729),
+    ("benzene", 1.501),
+    ("silicone oil", 1.520_45),
+    ("bromine", 1.661),
+    ("water ice", 1.31),
+    ("fused quartz", 1.458),
+    ("pyrex", 1.47),
+    ("acrylic glass", 1.49),
+    ("polypropylene", 1.49),
+    ("bk7", 1.5046),
+    ("sodium chloride", 1.544),
+    ("amber", 1.55),
+    ("pet", 1.575),
+    ("diamond", 2.419),
+];
+
+/// The index of refraction of one of Mitsuba's named materials (any case).
+fn named_ior(name: &str) -> Option<f32> {
+    let name = name.trim().to_lowercase();
+    NAMED_IORS.iter().find(|(n, _)| *n == name).map(|&(_, v)| v)
 }

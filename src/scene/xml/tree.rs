@@ -8,7 +8,7 @@ use crate::scene::desc::{Rgb, TransformStep};
 use crate::scene::{SceneError, Sources};
 use glam::Vec3;
 use roxmltree::Node;
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
@@ -127,7 +127,6 @@ pub(super) fn read(
 ) -> Result<(Object, Vec<PathBuf>)> {
     let mut reader = Reader {
         params: defines.iter().cloned().collect(),
-        declared: HashSet::new(),
         nesting: 0,
         includes: 0,
         ids: HashMap::new(),
@@ -151,8 +150,6 @@ const MAX_INCLUDES: usize = 1024;
 struct Reader<'s> {
     /// `$name` values: `-D` first, then `<default>` elements in document order.
     params: HashMap<String, String>,
-    /// Names given by `<default>` elements, so one given twice is an error.
-    declared: HashSet<String>,
     /// Elements open around the one being read, and includes read so far.
     nesting: usize,
     includes: usize,
@@ -316,11 +313,8 @@ impl Reader<'_> {
         self.attributes(child, pos, &["name", "value"])?;
         let name = self.required(child, pos, "name")?;
         let value = self.required(child, pos, "value")?;
-        if !self.declared.insert(name.clone()) {
-            return Err(pos
-                .err(format!("<default name=\"{name}\"> is given twice; give each default once")));
-        }
-        // A -D value was put there first and wins.
+        // As in Mitsuba, the first value of a name wins: a -D value (put there first), then
+        // the first <default> (an included file may repeat the scene's).
         self.params.entry(name).or_insert(value);
         Ok(())
     }
