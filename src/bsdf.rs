@@ -82,6 +82,20 @@ pub struct BsdfSample {
 }
 
 impl Bsdf {
+    /// The share of light that passes straight through the surface at `cos` (a ray's cosine
+    /// with the normal, either side), as Mitsuba's null component: 1 for a null surface,
+    /// `1 - R'` for a thin dielectric, `None` for a surface nothing passes straight through.
+    /// Paths and shadow rays cross it as they cross a null surface, without a scattering
+    /// event (Mitsuba neither counts its depth nor blocks next-event estimation there).
+    #[inline]
+    pub fn null_transmission(&self, cos: f32) -> Option<f32> {
+        match *self {
+            Bsdf::Null => Some(1.0),
+            Bsdf::ThinDielectric { eta } => Some(1.0 - thin_reflectance(cos, eta)),
+            _ => None,
+        }
+    }
+
     /// Whether next-event estimation can help at this surface.
     pub fn has_smooth_component(&self) -> bool {
         matches!(self, Bsdf::Diffuse { .. })

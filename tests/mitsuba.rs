@@ -251,6 +251,13 @@ fn mitsuba_l_obj_checker_named_ior_default_lens() {
     validate("l-obj-checker", 1024);
 }
 
+/// A thin dielectric's transmission is a null event, as in Mitsuba: no depth counted (at
+/// `max_depth` 4) and next-event estimates through it.
+#[test]
+fn mitsuba_m_thin_dielectric_counts_no_depth() {
+    validate("m-pane-depth", 4096);
+}
+
 /// Walls that name no medium keep the fog they stand in (zerovar made such walls borders
 /// of vacuum, and rendered bench scenes' rooms 5-18% darker than Mitsuba).
 #[test]

@@ -384,9 +384,9 @@ fn bad_input_names_the_place_and_the_fix() {
         (
             "thin",
             radius,
-            "<bsdf type=\"thindielectric\"><string name=\"int_ior\" value=\"bk7\"/></bsdf>",
+            "<bsdf type=\"thindielectric\"><string name=\"int_ior\" value=\"bk8\"/></bsdf>",
             "thin.xml:6:37",
-            &["`int_ior` must be a <float> (named materials"],
+            &["int_ior \"bk8\" is not one of Mitsuba's named materials", "give the index"],
         ),
         (
             "include",

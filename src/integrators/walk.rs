@@ -210,7 +210,7 @@ fn walk<C: RadianceCache>(
             break;
         };
         w.emitter_hit(&s, &hit);
-        if scene.surfaces[hit.shape as usize].bsdf == Bsdf::Null {
+        if w.passes_straight(&s, &hit) {
             nulls += 1;
             if nulls > MAX_NULL_CROSSINGS {
                 break;
@@ -487,6 +487,19 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         });
     }
 
+    /// Whether the path passes straight through the surface it hit, without a scattering
+    /// event: always through a null surface, through a thin dielectric with the share that
+    /// passes (Mitsuba's null component), its weight unchanged since that share is the
+    /// probability. Otherwise the surface scatters (a thin dielectric then reflects).
+    fn passes_straight(&mut self, s: &PathState, hit: &SurfaceHit) -> bool {
+        let bsdf = &self.scene.surfaces[hit.shape as usize].bsdf;
+        match bsdf.null_transmission(s.ray.direction.dot(hit.ng)) {
+            Some(p) if p >= 1.0 => true,
+            Some(p) => self.sampler.next_1d() < p,
+            None => false,
+        }
+    }
+
     /// The path escaped: infinite lights it sees, weighed against next-event estimation.
     fn escape(&mut self, s: &PathState) {
         for &li in &self.scene.infinite_lights {
@@ -578,11 +591,16 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
     /// The number that chooses the strategy, rescaled, also picks the BSDF's lobe (or the
     /// halo's light), so every branch sees a uniform number.
     fn surface_direction(&mut self, mix: &Mixture, at: &SurfacePoint) -> Option<DirectionSample> {
-        let (strategy, u1) = if mix.mixes() {
+        let (strategy, mut u1) = if mix.mixes() {
             mix.choose(self.sampler.next_1d())
         } else {
             (Strategy::Standard, self.sampler.next_1d())
         };
+        // A thin dielectric's transmission was already taken as a null crossing
+        // (`passes_straight`): what scatters here reflects, as 0 draws its reflection.
+        if matches!(at.bsdf, Bsdf::ThinDielectric { .. }) {
+            u1 = 0.0;
+        }
         let cache = &*self.ctx.cache;
         // BSDF sampling's density over the mixture's at `wi`.
         let gain_at =
@@ -959,10 +977,11 @@ pub fn shadow_transmittance(
             let mut tr = Spectrum::ONE;
             let mut start = 0.0;
             // The shadow ray's end closes the last part.
-            let end = Crossing { t: distance, medium: None };
-            for &Crossing { t: end, medium: next } in crossings.iter().chain([&end]) {
+            let end = Crossing { t: distance, passes: 1.0, medium: None };
+            for &Crossing { t: end, passes, medium: next } in crossings.iter().chain([&end]) {
                 let part = Ray::new(ray.at(start), ray.direction);
                 tr *= part_transmittance(scene, medium, &part, end - start, sampler, counters);
+                tr *= passes;
                 if tr.max_element() <= 0.0 {
                     return Spectrum::ZERO;
                 }
@@ -1008,8 +1027,9 @@ fn shadow_steps(
             return Spectrum::ZERO;
         }
         let Some(hit) = hit else { return tr };
-        if scene.surfaces[hit.shape as usize].bsdf != Bsdf::Null {
-            return Spectrum::ZERO;
+        match scene.surfaces[hit.shape as usize].bsdf.null_transmission(ray.direction.dot(hit.ng)) {
+            Some(passes) => tr *= passes,
+            None => return Spectrum::ZERO,
         }
         medium = scene.medium_after(&hit, ray.direction, medium);
         let origin = offset_origin(hit.p, hit.ng, ray.direction);
@@ -1148,6 +1168,49 @@ radiance = 1
         assert_eq!(scene.trace_shadow(&ray, 10.0, None, &mut crossings), ShadowTrace::Blocked);
         let tr =
             shadow_transmittance(&scene, ray, 10.0, None, &mut sampler, &mut Counters::default());
+        assert_eq!(tr, Spectrum::ZERO);
+    }
+
+    /// A thin dielectric lets a shadow ray through with the share Mitsuba's null component
+    /// passes, `1 - R'` at the ray's angle, from either side; a diffuse surface blocks it.
+    #[test]
+    fn shadow_rays_pass_thin_dielectrics_by_their_null_transmission() {
+        let text = "[camera]\norigin = [0, 0, 6]\ntarget = [0, 0, 0]\nfov = 40\nresolution = [8, 8]\n\n\
+                    [[shapes]]\ntype = \"rectangle\"\nscale = 1\ntransform = [{ scale = 5 }]\n\
+                    bsdf = { type = \"thindielectric\", int_ior = 1.5, ext_ior = 1 }\n";
+        let text = text.replace("scale = 1\n", "");
+        let scene = crate::scene::load_str(std::path::Path::new("pane.toml"), &text, &[])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut sampler = Sampler::new(3, 0, 0);
+        for (dir, cos) in [(Vec3A::new(0.0, 0.0, -1.0), 1.0f32), (Vec3A::new(0.6, 0.0, 0.8), 0.8)] {
+            for side in [1.0f32, -1.0] {
+                let ray = Ray::new(-side * 2.0 * dir, side * dir);
+                let tr = shadow_transmittance(
+                    &scene,
+                    ray,
+                    4.0,
+                    None,
+                    &mut sampler,
+                    &mut Counters::default(),
+                );
+                let expected =
+                    crate::bsdf::Bsdf::ThinDielectric { eta: 1.5 }.null_transmission(cos).unwrap();
+                assert!(
+                    (tr.x - expected).abs() < 1e-6,
+                    "cos {cos}, side {side}: {tr:?} against {expected}"
+                );
+            }
+        }
+        // At normal incidence 1 - R' = 12/13 (R' = 1/13 for eta 1.5).
+        let normal = crate::bsdf::Bsdf::ThinDielectric { eta: 1.5 }.null_transmission(1.0).unwrap();
+        assert!((normal - 12.0 / 13.0).abs() < 1e-6);
+        let opaque = text
+            .replace("type = \"thindielectric\", int_ior = 1.5, ext_ior = 1", "type = \"diffuse\"");
+        let scene =
+            crate::scene::load_str(std::path::Path::new("wall.toml"), &opaque, &[]).unwrap();
+        let ray = Ray::new(Vec3A::new(0.0, 0.0, 2.0), Vec3A::new(0.0, 0.0, -1.0));
+        let tr =
+            shadow_transmittance(&scene, ray, 4.0, None, &mut sampler, &mut Counters::default());
         assert_eq!(tr, Spectrum::ZERO);
     }
 }

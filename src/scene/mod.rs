@@ -175,11 +175,14 @@ pub struct RenderSettings {
     pub seed: u64,
 }
 
-/// A null surface a shadow ray crosses: where, and the medium beyond it.
+/// A surface a shadow ray passes straight through (null, or a thin dielectric): where, the
+/// share of light that passes, and the medium beyond it.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct Crossing {
     /// Ray parameter of the crossing.
     pub(crate) t: f32,
+    /// The share of light passing (`Bsdf::null_transmission`).
+    pub(crate) passes: f32,
     /// The medium the ray travels in after it.
     pub(crate) medium: Option<u32>,
 }
@@ -332,8 +335,9 @@ impl Scene {
     }
 
     /// Traces a shadow ray that starts in `medium` to `t_max` in one traversal:
-    /// [`ShadowTrace::Blocked`] if any surface but a null one lies in the way; otherwise the
-    /// null surfaces it crosses, sorted along the ray, each with the medium the ray enters there.
+    /// [`ShadowTrace::Blocked`] if a surface that lets nothing straight through lies in the way;
+    /// otherwise the surfaces it crosses (null ones and thin dielectrics), sorted along the
+    /// ray, each with the share of light passing and the medium the ray enters there.
     pub(crate) fn trace_shadow<const N: usize>(
         &self,
         ray: &Ray,
@@ -343,7 +347,8 @@ impl Scene {
     ) -> ShadowTrace {
         crossings.clear();
         let mut hits = arrayvec::ArrayVec::<BvhHit, N>::new();
-        let blocks = |shape: u32| self.surfaces[shape as usize].bsdf != Bsdf::Null;
+        let blocks =
+            |shape: u32| self.surfaces[shape as usize].bsdf.null_transmission(1.0).is_none();
         let trace = self.bvh.shadow(&self.shapes, ray, t_max, blocks, &mut hits);
         if trace == ShadowTrace::Clear {
             hits.sort_unstable_by(|a, b| a.hit.t.total_cmp(&b.hit.t));
@@ -354,8 +359,10 @@ impl Scene {
                 if s.flip {
                     ng = -ng;
                 }
-                medium = s.medium_beyond(ray.direction.dot(ng) < 0.0, medium);
-                Crossing { t: h.hit.t, medium }
+                let cos = ray.direction.dot(ng);
+                medium = s.medium_beyond(cos < 0.0, medium);
+                let passes = s.bsdf.null_transmission(cos).unwrap_or(0.0);
+                Crossing { t: h.hit.t, passes, medium }
             }));
         }
         trace
