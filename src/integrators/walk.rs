@@ -492,8 +492,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
     /// passes (Mitsuba's null component), its weight unchanged since that share is the
     /// probability. Otherwise the surface scatters (a thin dielectric then reflects).
     fn passes_straight(&mut self, s: &PathState, hit: &SurfaceHit) -> bool {
-        let bsdf = &self.scene.surfaces[hit.shape as usize].bsdf;
-        match bsdf.null_transmission(s.ray.direction.dot(hit.ng)) {
+        match self.scene.null_transmission(hit.shape, s.ray.direction.dot(hit.ng)) {
             Some(p) if p >= 1.0 => true,
             Some(p) => self.sampler.next_1d() < p,
             None => false,
@@ -598,7 +597,9 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         };
         // A thin dielectric's transmission was already taken as a null crossing
         // (`passes_straight`): what scatters here reflects, as 0 draws its reflection.
-        if matches!(at.bsdf, Bsdf::ThinDielectric { .. }) {
+        if matches!(at.bsdf, Bsdf::ThinDielectric { .. })
+            && !self.scene.settings.surface_events_only
+        {
             u1 = 0.0;
         }
         let cache = &*self.ctx.cache;
@@ -1027,7 +1028,7 @@ fn shadow_steps(
             return Spectrum::ZERO;
         }
         let Some(hit) = hit else { return tr };
-        match scene.surfaces[hit.shape as usize].bsdf.null_transmission(ray.direction.dot(hit.ng)) {
+        match scene.null_transmission(hit.shape, ray.direction.dot(hit.ng)) {
             Some(passes) => tr *= passes,
             None => return Spectrum::ZERO,
         }

@@ -226,6 +226,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
         max_depth: (r.max_depth >= 0).then_some(r.max_depth as u32),
         rr_depth: r.rr_depth,
         seed: r.seed,
+        surface_events_only: r.surface_events_only,
     };
 
     let mut shapes = Vec::new();

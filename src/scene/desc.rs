@@ -109,11 +109,16 @@ pub struct RenderDesc {
     pub rr_depth: u32,
     /// Seed of the random streams when the command line gives none.
     pub seed: u64,
+    /// Every surface hit is a scattering event, as Mitsuba's `path` integrator counts them
+    /// (set by the XML reader for it): a thin dielectric's transmission then counts depth and
+    /// blocks shadow rays, where Mitsuba's `volpath` takes it as a null event.
+    #[serde(skip)]
+    pub surface_events_only: bool,
 }
 
 impl Default for RenderDesc {
     fn default() -> Self {
-        Self { spp: 64, max_depth: -1, rr_depth: 5, seed: 0 }
+        Self { spp: 64, max_depth: -1, rr_depth: 5, seed: 0, surface_events_only: false }
     }
 }
 

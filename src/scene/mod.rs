@@ -173,6 +173,9 @@ pub struct RenderSettings {
     pub rr_depth: u32,
     /// Default seed.
     pub seed: u64,
+    /// Every surface hit scatters, none is a null event but a null surface's (Mitsuba's
+    /// `path` integrator; see `RenderDesc::surface_events_only`).
+    pub surface_events_only: bool,
 }
 
 /// A surface a shadow ray passes straight through (null, or a thin dielectric): where, the
@@ -361,11 +364,23 @@ impl Scene {
                 }
                 let cos = ray.direction.dot(ng);
                 medium = s.medium_beyond(cos < 0.0, medium);
-                let passes = s.bsdf.null_transmission(cos).unwrap_or(0.0);
+                let passes = self.null_transmission(h.prim.shape, cos).unwrap_or(0.0);
                 Crossing { t: h.hit.t, passes, medium }
             }));
         }
         trace
+    }
+
+    /// The share of light passing straight through surface `shape` at `cos`
+    /// (`Bsdf::null_transmission`), but none through a thin dielectric where every surface
+    /// hit scatters (`RenderSettings::surface_events_only`).
+    #[inline]
+    pub fn null_transmission(&self, shape: u32, cos: f32) -> Option<f32> {
+        let bsdf = &self.surfaces[shape as usize].bsdf;
+        if self.settings.surface_events_only && *bsdf != Bsdf::Null {
+            return None;
+        }
+        bsdf.null_transmission(cos)
     }
 
     /// The medium a ray leaving `hit` along `dir` travels in, having come in `current`.

@@ -101,7 +101,7 @@ pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
     Ok(SceneDesc {
         defaults: toml::Table::new(),
         camera,
-        render: RenderDesc { max_depth, rr_depth, ..render },
+        render: RenderDesc { max_depth, rr_depth, surface_events_only: kind == "path", ..render },
         medium: None,
         media: std::mem::take(&mut conv.media),
         shapes,
