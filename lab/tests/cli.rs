@@ -240,6 +240,26 @@ fn bad_arguments_fail_clearly() {
             "{args:?}: {err}"
         );
     }
+    // A reference's default budget, 16 times the scene's spp, past 2^32: refused, not wrapped
+    // to a few samples.
+    write("cloud.vol", vol(&[0.5, 1.0, 0.2, 0.0]));
+    let many = write("many-spp.toml", format!("{GOOD}\n[render]\nspp = 268435457\n"));
+    let out = temp_dir().join("many-spp.exr");
+    let o = zerovar(&["reference", many.to_str().unwrap(), "-o", out.to_str().unwrap()]);
+    assert!(
+        !o.status.success() && stderr(&o).contains("more than can be counted"),
+        "{}",
+        stderr(&o)
+    );
+    assert!(!out.exists());
+    // A named pipe as the scene: an error at once, not a read that blocks.
+    let fifo = temp_dir().join("scene-fifo.toml");
+    let _ = std::fs::remove_file(&fifo);
+    let made = std::process::Command::new("mkfifo").arg(&fifo).status();
+    if made.is_ok_and(|s| s.success()) {
+        let o = zerovar(&["check", fifo.to_str().unwrap()]);
+        assert!(!o.status.success() && stderr(&o).contains("not a regular file"), "{}", stderr(&o));
+    }
 }
 
 #[test]

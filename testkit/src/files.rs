@@ -16,8 +16,15 @@ pub fn temp_dir() -> PathBuf {
 }
 
 /// Writes `contents` to a file in the temporary directory and returns its path.
+///
+/// Tests run in parallel and several write the same input file, so the file is written under a
+/// unique name and renamed into place: a reader sees the old or the new file, never a truncated one.
 pub fn write(name: &str, contents: impl AsRef<[u8]>) -> PathBuf {
+    static NEXT: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
     let path = temp_dir().join(name);
-    std::fs::write(&path, contents).unwrap();
+    let n = NEXT.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let partial = temp_dir().join(format!(".{name}.{n}.partial"));
+    std::fs::write(&partial, contents).unwrap();
+    std::fs::rename(&partial, &path).unwrap();
     path
 }
