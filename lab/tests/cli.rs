@@ -239,6 +239,8 @@ fn bad_arguments_fail_clearly() {
             !o.status.success() && err.contains(needle) && !err.contains("panicked"),
             "{args:?}: {err}"
         );
+        // Said once: a library error that quotes its cause is not followed by it again.
+        assert_eq!(err.matches(needle).count(), 1, "{args:?} repeats itself: {err}");
     }
     // A reference's default budget, 16 times the scene's spp, past 2^32: refused, not wrapped
     // to a few samples.
