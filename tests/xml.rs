@@ -160,7 +160,7 @@ fn lights_match_the_toml_format() {
     let body = r#"
     <shape type="rectangle">
         <transform name="to_world"><rotate x="1" angle="-90"/><scale value="3"/></transform>
-        <bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="0.7, 0.5, 0.3"/></bsdf></bsdf>
+        <bsdf type="twosided"><bsdf type="diffuse"><spectrum name="reflectance" value="400:0.1, 500:0.5, 600:0.8, 700:0.9"/></bsdf></bsdf>
     </shape>
     <shape type="disk">
         <transform name="to_world"><rotate x="1" angle="90"/><translate y="2"/></transform>
@@ -190,7 +190,8 @@ resolution = [24, 18]
 [[shapes]]
 type = "rectangle"
 transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 3 }]
-bsdf = { type = "diffuse", reflectance = [0.7, 0.5, 0.3], two_sided = true }
+# The spectrum's colour in Mitsuba 3.9.1 scalar_rgb (`mi.traverse`).
+bsdf = { type = "diffuse", reflectance = [0.87801546, 0.6357789, 0.27034214], two_sided = true }
 
 [[shapes]]
 type = "disk"
@@ -206,10 +207,11 @@ target = [0, 0, 0]
 intensity = 20
 cutoff_angle = 30
 
+# A one-value <spectrum> in an emitter is equal-energy light: 0.5 x xyz_to_srgb(1, 1, 1).
 [[lights]]
 type = "directional"
 direction = [-1, -2, -1]
-irradiance = 0.5
+irradiance = [0.6023970, 0.4741455, 0.4544580]
 
 [[lights]]
 type = "envmap"
@@ -387,6 +389,27 @@ fn bad_input_names_the_place_and_the_fix() {
             "<bsdf type=\"thindielectric\"><string name=\"int_ior\" value=\"bk8\"/></bsdf>",
             "thin.xml:6:37",
             &["int_ior \"bk8\" is not one of Mitsuba's named materials", "give the index"],
+        ),
+        (
+            "order",
+            radius,
+            "<bsdf type=\"diffuse\"><spectrum name=\"reflectance\" value=\"500:0.5, 400:0.2\"/></bsdf>",
+            "order.xml:6:30",
+            &["increasing order of wavelength; 400 nm follows 500 nm"],
+        ),
+        (
+            "pair",
+            radius,
+            "<bsdf type=\"diffuse\"><spectrum name=\"reflectance\" value=\"500:0.5\"/></bsdf>",
+            "pair.xml:6:30",
+            &["at least two wavelength:value pairs"],
+        ),
+        (
+            "nm",
+            radius,
+            "<bsdf type=\"diffuse\"><spectrum name=\"reflectance\" value=\"400:0.1, 500:\"/></bsdf>",
+            "nm.xml:6:30",
+            &["pairs of numbers (nm), not `500:`"],
         ),
         (
             "include",

@@ -131,7 +131,8 @@ impl Conv {
     fn volume(&self, p: &Props<'_>, name: &'static str) -> Result<Option<Volume>> {
         let Some(prop) = p.raw(name) else { return Ok(None) };
         let Value::Object(o) = &prop.value else {
-            let c = color(prop).ok_or_else(|| p.wrong(prop, &format!("{COLOR} or a <volume>")))?;
+            let c = color(prop, &p.obj.tag)
+                .ok_or_else(|| p.wrong(prop, &format!("{COLOR} or a <volume>")))?;
             return Ok(Some(Volume::Constant(c, Vec::new())));
         };
         let v = Props::new(o);

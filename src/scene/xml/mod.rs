@@ -5,10 +5,12 @@
 //! the description. Anything outside the subset is an error at its line and column that says
 //! what is supported; nothing is skipped silently.
 
+mod cie;
 mod media;
 mod props;
 mod scene;
 mod shapes;
+mod spectrum;
 mod tree;
 
 use super::desc::{MediumDesc, SceneDesc, TransformStep};

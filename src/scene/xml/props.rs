@@ -3,6 +3,7 @@
 //! is an error naming both types, and `finish` rejects whatever the plugin did not ask for,
 //! listing what it takes.
 
+use super::spectrum::{self, Place};
 use super::tree::{Object, Prop, Value};
 use crate::scene::SceneError;
 use crate::scene::desc::{Rgb, TransformStep};
@@ -80,11 +81,11 @@ impl<'a> Props<'a> {
         }
     }
 
-    /// A colour: `<rgb>`, `<float>` or a one-value `<spectrum>`.
+    /// A colour: `<rgb>`, `<float>` or a `<spectrum>`.
     pub(super) fn color(&self, name: &'static str) -> Result<Option<Rgb>> {
         match self.raw(name) {
             None => Ok(None),
-            Some(p) => color(p).map(Some).ok_or_else(|| self.wrong(p, COLOR)),
+            Some(p) => color(p, &self.obj.tag).map(Some).ok_or_else(|| self.wrong(p, COLOR)),
         }
     }
 
@@ -163,15 +164,17 @@ impl<'a> Props<'a> {
     }
 }
 
-pub(super) const COLOR: &str = "a colour (<rgb>, <float> or a one-value <spectrum>)";
+pub(super) const COLOR: &str = "a colour (<rgb>, <float> or <spectrum>)";
 
-/// A property's value as a colour, if it is one.
-pub(super) fn color(p: &Prop) -> Option<Rgb> {
+/// A property's value as a colour, if it is one; `tag` is the tag of the object that holds
+/// the property (a spectrum inside an `<emitter>` reads differently, see `spectrum`).
+pub(super) fn color(p: &Prop, tag: &str) -> Option<Rgb> {
     match &p.value {
         Value::Rgb(c) => Some(*c),
         Value::Float(v) => Some(Rgb::Grey(*v as f32)),
         Value::Integer(v) => Some(Rgb::Grey(*v as f32)),
-        Value::Spectrum(v) => Some(Rgb::Grey(*v)),
+        Value::Spectrum(v) => Some(spectrum::uniform(*v, Place::of(tag, &p.name))),
+        Value::SpectrumPairs(pairs) => Some(spectrum::pairs(pairs, Place::of(tag, &p.name))),
         _ => None,
     }
 }

@@ -124,7 +124,7 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
                 Some(prop) => match &prop.value {
                     Value::Object(t) if t.tag == "texture" => Some(texture(t)?),
                     _ => Some(TextureDesc::Constant(
-                        color(prop)
+                        color(prop, &o.tag)
                             .ok_or_else(|| p.wrong(prop, &format!("{COLOR} or a <texture>")))?,
                     )),
                 },

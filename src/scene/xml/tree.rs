@@ -43,8 +43,10 @@ pub(super) enum Value {
     Boolean(bool),
     String(String),
     Rgb(Rgb),
-    /// A `<spectrum>` with one value (grey).
+    /// A `<spectrum>` with one value.
     Spectrum(f32),
+    /// A `<spectrum>` of wavelength:value pairs (nm), at least two, wavelengths increasing.
+    SpectrumPairs(Vec<[f64; 2]>),
     Point(Vec3),
     Vector(Vec3),
     Transform(Vec<TransformStep>),
@@ -61,7 +63,7 @@ impl Value {
             Value::Boolean(_) => "<boolean>".into(),
             Value::String(_) => "<string>".into(),
             Value::Rgb(_) => "<rgb>".into(),
-            Value::Spectrum(_) => "<spectrum>".into(),
+            Value::Spectrum(_) | Value::SpectrumPairs(_) => "<spectrum>".into(),
             Value::Point(_) => "<point>".into(),
             Value::Vector(_) => "<vector>".into(),
             Value::Transform(_) => "<transform>".into(),
@@ -548,14 +550,12 @@ impl Reader<'_> {
                 Some([r, g, b]) => Value::Rgb(Rgb::Rgb([*r, *g, *b])),
                 _ => return Err(bad("three numbers \"r, g, b\" or one grey value")),
             },
+            _ if text.contains(':') => {
+                Value::SpectrumPairs(spectrum_pairs(&text).map_err(|what| bad(&what))?)
+            }
             _ => match numbers(&text).as_deref() {
                 Some([v]) => Value::Spectrum(*v),
-                _ => {
-                    return Err(bad(
-                        "one number (a grey spectrum); wavelength:value lists are not \
-                         supported, use <rgb>",
-                    ));
-                }
+                _ => return Err(bad("one number or wavelength:value pairs (nm)")),
             },
         })
     }
@@ -658,6 +658,33 @@ fn number(text: &str) -> Option<f32> {
 }
 
 /// Numbers separated by commas and/or white space.
+/// The pairs of a `<spectrum value="400:0.1, 500:0.4, ...">`, or what they must be.
+fn spectrum_pairs(text: &str) -> std::result::Result<Vec<[f64; 2]>, String> {
+    let mut pairs: Vec<[f64; 2]> = Vec::new();
+    for item in text.split(',').map(str::trim).filter(|t| !t.is_empty()) {
+        let pair = item.split_once(':').and_then(|(w, v)| {
+            let (w, v) = (w.trim().parse::<f64>().ok()?, v.trim().parse::<f64>().ok()?);
+            (w.is_finite() && v.is_finite()).then_some([w, v])
+        });
+        let Some(pair) = pair else {
+            return Err(format!("wavelength:value pairs of numbers (nm), not `{item}`"));
+        };
+        if let Some(last) = pairs.last()
+            && pair[0] <= last[0]
+        {
+            return Err(format!(
+                "pairs in increasing order of wavelength; {} nm follows {} nm",
+                pair[0], last[0]
+            ));
+        }
+        pairs.push(pair);
+    }
+    if pairs.len() < 2 {
+        return Err("at least two wavelength:value pairs (nm), or one number".into());
+    }
+    Ok(pairs)
+}
+
 fn numbers(text: &str) -> Option<Vec<f32>> {
     text.split(|c: char| c == ',' || c.is_whitespace())
         .filter(|t| !t.is_empty())
