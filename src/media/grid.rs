@@ -5,7 +5,7 @@ use super::vol::VolGrid;
 use crate::math::Spectrum;
 use glam::Vec3A;
 
-/// A grid of one (density) or three (RGB albedo) channels over the unit cube.
+/// A grid of one (density) or three (RGB density or albedo) channels over the unit cube.
 #[derive(Clone, Debug)]
 pub struct Grid {
     res: [usize; 3],
@@ -36,10 +36,12 @@ impl Grid {
         self.max
     }
 
-    /// The first channel of voxel `(x, y, z)`.
+    /// The smallest and largest channel of voxel `(x, y, z)`.
     #[inline]
-    pub fn voxel(&self, x: usize, y: usize, z: usize) -> f32 {
-        self.data[((z * self.res[1] + y) * self.res[0] + x) * self.channels]
+    pub fn voxel_range(&self, x: usize, y: usize, z: usize) -> (f32, f32) {
+        let i = ((z * self.res[1] + y) * self.res[0] + x) * self.channels;
+        let v = &self.data[i..i + self.channels];
+        (v.iter().copied().fold(f32::INFINITY, f32::min), v.iter().copied().fold(0.0, f32::max))
     }
 
     /// The interpolated first channel at a point of the unit cube.

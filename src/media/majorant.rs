@@ -68,9 +68,10 @@ impl MajorantGrid {
                     for z in z0..=z1 {
                         for y in y0..=y1 {
                             for x in x0..=x1 {
-                                let v = g.voxel(x, y, z);
-                                mn = mn.min(v);
-                                mx = mx.max(v);
+                                // Over every channel: an RGB density's bounds hold for each.
+                                let (lo, hi) = g.voxel_range(x, y, z);
+                                mn = mn.min(lo);
+                                mx = mx.max(hi);
                             }
                         }
                     }

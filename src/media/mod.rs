@@ -1,9 +1,9 @@
 //! Participating media: what a ray meets between surfaces.
 //!
 //! A medium is either homogeneous (constant RGB extinction and albedo) or heterogeneous: a
-//! density field (a `.vol` or `.vdb` grid or the procedural noise cloud) over the unit cube
-//! placed by `to_world`, scaled and optionally tinted per channel, with a constant or gridded
-//! RGB albedo.
+//! density field (a `.vol` or `.vdb` grid, one channel or RGB, or the procedural noise cloud)
+//! over the unit cube placed by `to_world`, scaled and optionally tinted per channel, with a
+//! constant or gridded RGB albedo.
 //! Outside its box a heterogeneous medium is empty. Each medium also has a phase function and
 //! an optional emission: radiance emitted per unit length is `sigma_a(x) * emission`.
 //! `tracking` decides how to walk through a medium; this module only answers lookups.
@@ -76,7 +76,22 @@ impl DensityField {
         }
     }
 
-    /// An upper bound of the density over the cube.
+    /// The density at a point of the unit cube per channel: an RGB grid's three, the same
+    /// value in each otherwise.
+    #[inline]
+    pub fn rgb(&self, p: Vec3A) -> Spectrum {
+        match self {
+            DensityField::Grid(g) => g.rgb(p),
+            d => Spectrum::splat(d.at(p)),
+        }
+    }
+
+    /// Whether the density differs between channels (a three-channel grid).
+    pub fn is_rgb(&self) -> bool {
+        matches!(self, DensityField::Grid(g) if g.channels() == 3)
+    }
+
+    /// An upper bound of the density over the cube (over every channel).
     pub fn max_value(&self) -> f32 {
         match self {
             DensityField::Grid(g) => g.max_value(),
@@ -109,8 +124,8 @@ pub struct Heterogeneous {
 }
 
 impl Heterogeneous {
-    /// A heterogeneous medium: `sigma_t(x) = scale * tint * density(x)` over the unit cube
-    /// mapped by `to_world`.
+    /// A heterogeneous medium: `sigma_t(x) = scale * tint * density(x)` (per channel for an
+    /// RGB grid) over the unit cube mapped by `to_world`.
     pub fn new(
         to_world: Transform,
         density: DensityField,
@@ -151,7 +166,7 @@ impl Heterogeneous {
         if !(local.cmpge(Vec3A::ZERO).all() && local.cmple(Vec3A::ONE).all()) {
             return Coefficients { sigma_t: Spectrum::ZERO, albedo: Spectrum::ZERO };
         }
-        let sigma_t = self.tint * (self.scale * self.density.at(local));
+        let sigma_t = self.tint * (self.density.rgb(local) * self.scale);
         Coefficients { sigma_t, albedo: self.albedo_local(local) }
     }
 
@@ -196,7 +211,7 @@ impl Heterogeneous {
         if !(local.cmpge(Vec3A::ZERO).all() && local.cmple(Vec3A::ONE).all()) {
             return Coefficients { sigma_t: Spectrum::ZERO, albedo: Spectrum::ZERO };
         }
-        let sigma_t = self.tint * (self.scale * self.density.at(local));
+        let sigma_t = self.tint * (self.density.rgb(local) * self.scale);
         let albedo = match &self.albedo {
             AlbedoField::Constant(a) => *a,
             AlbedoField::Grid(g) => g.rgb(local),
@@ -242,7 +257,7 @@ impl Medium {
     pub fn is_chromatic(&self) -> bool {
         match &self.kind {
             MediumKind::Homogeneous { sigma_t, .. } => !is_grey(*sigma_t),
-            MediumKind::Heterogeneous(h) => !is_grey(h.tint),
+            MediumKind::Heterogeneous(h) => !is_grey(h.tint) || h.density.is_rgb(),
         }
     }
 

@@ -570,10 +570,10 @@ fn read_grid(cx: &Ctx<'_>, file: &Path, channels: &[usize]) -> Result<Grid> {
     Ok(Grid::new(vol))
 }
 
-/// A `.vol` density of one channel, or of three whose channels are in one proportion
-/// everywhere (a density times a colour, as an RGB extinction grid for Mitsuba often is):
-/// the grid of its largest channel and the colour (white for one channel). zerovar's grid media
-/// are a density times a colour, so other RGB grids are refused.
+/// A `.vol` density of one channel, or of three: where the three are in one proportion
+/// everywhere (a density times a colour, as an RGB extinction grid for Mitsuba often is), the
+/// grid of its largest channel and the colour, which keeps lookups to one channel; otherwise
+/// the RGB grid itself and white.
 fn read_density(cx: &Ctx<'_>, file: &Path) -> Result<(Grid, Spectrum)> {
     let vol = VolGrid::read(file).or_else(|e| cx.err(e.to_string()))?;
     match vol.channels {
@@ -599,36 +599,22 @@ fn read_density(cx: &Ctx<'_>, file: &Path) -> Result<(Grid, Spectrum)> {
             } else {
                 2
             };
-            let mut density = Vec::with_capacity(vol.data.len() / 3);
-            for (i, v) in vol.data.chunks_exact(3).enumerate() {
-                let d = v[main];
-                for c in 0..3 {
-                    let expected = d * colour[c];
-                    if (v[c] - expected).abs()
-                        > 1e-4 * top.max(f32::MIN_POSITIVE) + 1e-5 * v[c].abs()
-                    {
-                        let [x, y, z] = [
-                            i % vol.resolution[0],
-                            i / vol.resolution[0] % vol.resolution[1],
-                            i / (vol.resolution[0] * vol.resolution[1]),
-                        ];
-                        return cx.err(format!(
-                            "{}: voxel ({x}, {y}, {z}) holds {v:?}, not in the proportion {:?} of the grid's other voxels; zerovar's grid media are a density times one colour: give a one-channel density and the colour as the medium's extinction",
-                            file.display(),
-                            colour.to_array()
-                        ));
-                    }
-                }
-                density.push(d);
+            let proportional = vol.data.chunks_exact(3).all(|v| {
+                (0..3).all(|c| {
+                    (v[c] - v[main] * colour[c]).abs()
+                        <= 1e-4 * top.max(f32::MIN_POSITIVE) + 1e-5 * v[c].abs()
+                })
+            });
+            if !proportional {
+                // Channels that vary apart: a grid of three densities, tracked spectrally.
+                return Ok((Grid::new(vol), Spectrum::ONE));
             }
+            let density: Vec<f32> = vol.data.chunks_exact(3).map(|v| v[main]).collect();
             let grid =
                 VolGrid::new(vol.resolution, 1, density).or_else(|e| cx.err(e.to_string()))?;
             Ok((Grid::new(grid), colour))
         }
-        n => cx.err(format!(
-            "{}: has {n} channels; expected 1 (or 3 in one proportion)",
-            file.display()
-        )),
+        n => cx.err(format!("{}: has {n} channels; expected 1 or 3 (RGB)", file.display())),
     }
 }
 
