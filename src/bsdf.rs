@@ -1,6 +1,7 @@
-//! Surface scattering: index-matched null boundaries, Lambertian diffuse, smooth dielectric and
+//! Surface scattering: index-matched null boundaries, Lambertian diffuse, smooth dielectric,
 //! Mitsuba's thin dielectric (a slab of negligible thickness: specular reflection, or
-//! transmission straight through).
+//! transmission straight through) and Mitsuba's smooth plastic (a diffuse base under a smooth
+//! dielectric coating: a specular lobe and a diffuse one, each weighted by Fresnel).
 //!
 //! Directions are in the local shading frame (z = shading normal on the shape's front side) and
 //! both point away from the surface: `wo` towards where the path came from, `wi` where it goes.
@@ -28,6 +29,14 @@ pub enum Texture {
 }
 
 impl Texture {
+    /// The mean over the surface, per channel (a checkerboard's two colours in equal parts).
+    pub fn mean(&self) -> Spectrum {
+        match *self {
+            Texture::Constant(c) => c,
+            Texture::Checkerboard { color0, color1, .. } => 0.5 * (color0 + color1),
+        }
+    }
+
     /// The value at texture coordinates `uv`.
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Spectrum {
@@ -64,6 +73,70 @@ pub enum Bsdf {
         /// Slab over surrounding index of refraction.
         eta: f32,
     },
+    /// Mitsuba's `plastic`: a smooth dielectric coating over a diffuse base, one-sided.
+    Plastic(Plastic),
+}
+
+/// The parameters of [`Bsdf::Plastic`], with what it precomputes from them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plastic {
+    /// The base's albedo.
+    pub diffuse: Texture,
+    /// A factor on the coating's specular reflection.
+    pub specular: Spectrum,
+    /// Coating over outside index of refraction.
+    pub eta: f32,
+    /// Mitsuba's `nonlinear`: the internal reflections at the coating tint the base's colour.
+    pub nonlinear: bool,
+    /// The coating's reflectance of diffuse light from inside.
+    fdr_int: f32,
+    /// How strongly the specular lobe is sampled against the diffuse one.
+    specular_weight: f32,
+}
+
+impl Plastic {
+    /// A plastic with Mitsuba's derived constants.
+    pub fn new(diffuse: Texture, specular: Spectrum, eta: f32, nonlinear: bool) -> Self {
+        let (d, s) = (channel_mean(diffuse.mean()), channel_mean(specular));
+        let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
+        let fdr_int = fresnel_diffuse_reflectance(1.0 / eta);
+        Self { diffuse, specular, eta, nonlinear, fdr_int, specular_weight }
+    }
+
+    /// The probability of sampling the specular lobe for `cos_o` (Fresnel times its weight).
+    fn specular_probability(&self, f_o: f32) -> f32 {
+        let spec = f_o * self.specular_weight;
+        let diff = (1.0 - f_o) * (1.0 - self.specular_weight);
+        if spec + diff > 0.0 { spec / (spec + diff) } else { 0.0 }
+    }
+
+    /// The diffuse lobe's BSDF (without the cosine) for Fresnel terms `f_o` and `f_i`.
+    fn diffuse_value(&self, uv: Vec2, f_o: f32, f_i: f32) -> Spectrum {
+        let d = self.diffuse.eval(uv);
+        let inner = if self.nonlinear {
+            Spectrum::ONE - d * self.fdr_int
+        } else {
+            Spectrum::splat(1.0 - self.fdr_int)
+        };
+        d / inner * ((1.0 - f_o) * (1.0 - f_i) / (self.eta * self.eta) * FRAC_1_PI)
+    }
+}
+
+/// The mean of the three channels.
+fn channel_mean(c: Spectrum) -> f32 {
+    (c.x + c.y + c.z) / 3.0
+}
+
+/// The share of diffuse light a smooth boundary of relative index `eta` reflects: the fit of
+/// Egan and Hilgeman (1973) below 1, of d'Eon and Irving (2011) above, as Mitsuba computes it.
+fn fresnel_diffuse_reflectance(eta: f32) -> f32 {
+    if eta < 1.0 {
+        -1.4399 * eta * eta + 0.7099 * eta + 0.6681 + 0.0636 / eta
+    } else {
+        let x = 1.0 / eta;
+        let c = [0.919317, -3.4793, 6.75335, -7.80989, 4.98554, -1.36881];
+        c.iter().rev().fold(0.0, |acc, &k| acc * x + k)
+    }
 }
 
 /// A sampled continuation direction.
@@ -98,7 +171,7 @@ impl Bsdf {
 
     /// Whether next-event estimation can help at this surface.
     pub fn has_smooth_component(&self) -> bool {
-        matches!(self, Bsdf::Diffuse { .. })
+        matches!(self, Bsdf::Diffuse { .. } | Bsdf::Plastic(_))
     }
 
     /// BSDF times |cos wi| for a pair of local directions.
@@ -113,6 +186,13 @@ impl Bsdf {
                 }
                 reflectance.eval(uv) * (FRAC_1_PI * wi_z)
             }
+            Bsdf::Plastic(p) => {
+                if wo.z <= 0.0 || wi.z <= 0.0 {
+                    return Spectrum::ZERO;
+                }
+                let (f_o, f_i) = (fresnel(wo.z, p.eta).0, fresnel(wi.z, p.eta).0);
+                p.diffuse_value(uv, f_o, f_i) * wi.z
+            }
             _ => Spectrum::ZERO,
         }
     }
@@ -125,6 +205,12 @@ impl Bsdf {
                 let (wo_z, wi_z) =
                     if two_sided && wo.z < 0.0 { (-wo.z, -wi.z) } else { (wo.z, wi.z) };
                 if wo_z <= 0.0 || wi_z <= 0.0 { 0.0 } else { FRAC_1_PI * wi_z }
+            }
+            Bsdf::Plastic(p) => {
+                if wo.z <= 0.0 || wi.z <= 0.0 {
+                    return 0.0;
+                }
+                (1.0 - p.specular_probability(fresnel(wo.z, p.eta).0)) * FRAC_1_PI * wi.z
             }
             _ => 0.0,
         }
@@ -154,8 +240,32 @@ impl Bsdf {
             }
             Bsdf::Dielectric { eta } => sample_dielectric(eta, wo, u1),
             Bsdf::ThinDielectric { eta } => Some(sample_thin_dielectric(eta, wo, u1)),
+            Bsdf::Plastic(p) => sample_plastic(&p, wo, uv, u1, u2),
         }
     }
+}
+
+/// Mitsuba's plastic: the specular lobe with probability `specular_probability`, else the
+/// diffuse one by cosine sampling; the weight is the chosen lobe's value over its probability.
+fn sample_plastic(p: &Plastic, wo: Vec3A, uv: Vec2, u1: f32, u2: Vec2) -> Option<BsdfSample> {
+    if wo.z <= 0.0 {
+        return None;
+    }
+    let f_o = fresnel(wo.z, p.eta).0;
+    let specular = p.specular_probability(f_o);
+    if u1 < specular {
+        let wi = Vec3A::new(-wo.x, -wo.y, wo.z);
+        let weight = p.specular * (f_o / specular);
+        return Some(BsdfSample { wi, weight, pdf: specular, delta: true, eta: 1.0 });
+    }
+    let wi = cosine_hemisphere(u2);
+    let pdf = (1.0 - specular) * FRAC_1_PI * wi.z;
+    if pdf.is_nan() || pdf <= 0.0 {
+        return None;
+    }
+    let f_i = fresnel(wi.z, p.eta).0;
+    let weight = p.diffuse_value(uv, f_o, f_i) * (wi.z / pdf);
+    Some(BsdfSample { wi, weight, pdf, delta: false, eta: 1.0 })
 }
 
 /// Fresnel reflectance of an unpolarised wave; returns (F, cos_t, eta_it) where `cos_t` is the
@@ -275,6 +385,85 @@ mod tests {
         let sigma = (f64::from(r) * (1.0 - f64::from(r)) / f64::from(n)).sqrt();
         assert!((hits / f64::from(n) - f64::from(r)).abs() < 5.0 * sigma);
         assert!(!b.has_smooth_component() && b.eval(wo, -wo, Vec2::ZERO) == Spectrum::ZERO);
+    }
+
+    /// Mitsuba 3.9.1's `mi.fresnel_diffuse_reflectance`, and the fits' agreement with the
+    /// integral they approximate, 2 int_0^1 F(mu) mu dmu.
+    #[test]
+    fn diffuse_fresnel_reflectance_is_mitsubas_fit() {
+        for (eta, mitsuba) in [(1.49, 0.090_299_96), (1.0 / 1.49, 0.590_732_5), (2.4, 0.210_191_57)]
+        {
+            let fit = fresnel_diffuse_reflectance(eta);
+            assert!((fit - mitsuba).abs() < 1e-6, "{eta}: {fit} vs {mitsuba}");
+            let n = 100_000;
+            let integral: f64 = (0..n)
+                .map(|i| {
+                    let mu = (i as f64 + 0.5) / n as f64;
+                    2.0 * f64::from(fresnel(mu as f32, eta).0) * mu / n as f64
+                })
+                .sum();
+            assert!((f64::from(fit) / integral - 1.0).abs() < 0.01, "{eta}: {fit} vs {integral}");
+        }
+    }
+
+    /// Smooth plastic: the specular lobe is drawn with its probability, the diffuse lobe's
+    /// directions follow its density (chi-square), which integrates to the diffuse probability;
+    /// every weight is the lobe's value over its density, and the mean weight (the albedo) is
+    /// Fresnel reflection plus the integral of the diffuse lobe.
+    #[test]
+    fn plastic_samples_its_lobes_by_their_densities() {
+        let p = Plastic::new(
+            Texture::Constant(Spectrum::new(0.8, 0.5, 0.2)),
+            Spectrum::splat(0.9),
+            1.49 / 1.000_277,
+            false,
+        );
+        let b = Bsdf::Plastic(p);
+        assert!(b.has_smooth_component());
+        let grid = zerovar_testkit::SphereGrid::uniform(glam::DVec3::Z);
+        for wo in [Vec3A::new(0.3, 0.1, 0.9).normalize(), Vec3A::new(0.95, 0.0, 0.1).normalize()] {
+            let f_o = fresnel(wo.z, p.eta).0;
+            let specular = p.specular_probability(f_o);
+            let mut s = Sampler::new(7, 1, 2);
+            let n = 200_000;
+            let (mut dirs, mut spec_hits, mut albedo, mut square) = (Vec::new(), 0u32, 0.0, 0.0);
+            for _ in 0..n {
+                let bs = b.sample(wo, Vec2::ZERO, s.next_1d(), s.next_2d()).unwrap();
+                albedo += f64::from(bs.weight.x);
+                square += f64::from(bs.weight.x).powi(2);
+                if bs.delta {
+                    spec_hits += 1;
+                    assert_eq!(bs.wi, Vec3A::new(-wo.x, -wo.y, wo.z));
+                    assert!((bs.pdf - specular).abs() < 1e-7);
+                } else {
+                    let (f, pdf) = (b.eval(wo, bs.wi, Vec2::ZERO), b.pdf(wo, bs.wi));
+                    assert!((bs.pdf - pdf).abs() <= 1e-6 * pdf);
+                    assert!((bs.weight.x - f.x / pdf).abs() <= 1e-4 * bs.weight.x);
+                    dirs.push(bs.wi.as_dvec3());
+                }
+            }
+            let sigma = (f64::from(specular) * (1.0 - f64::from(specular)) / f64::from(n)).sqrt();
+            let share = f64::from(spec_hits) / f64::from(n);
+            assert!((share - f64::from(specular)).abs() < 5.0 * sigma, "{share} vs {specular}");
+            let diffuse = 1.0 - f64::from(specular);
+            let conditional = |d: glam::DVec3| b.pdf(wo, d.as_vec3a()) as f64 / diffuse;
+            grid.chi2(&dirs, &conditional).assert_pass(1e-3, "plastic's diffuse lobe");
+            let total = grid.integrate(&|d| b.pdf(wo, d.as_vec3a()) as f64);
+            assert!((total - diffuse).abs() < 1e-3 * diffuse, "pdf integrates to {total}");
+            // The albedo two ways: the mean weight, and Fresnel reflection plus the diffuse
+            // lobe's integral.
+            let expected = f64::from(f_o) * 0.9
+                + grid.integrate(&|d| b.eval(wo, d.as_vec3a(), Vec2::ZERO).x as f64);
+            let mean = albedo / f64::from(n);
+            let se = ((square / f64::from(n) - mean * mean) / f64::from(n)).sqrt();
+            assert!(se < 2.5e-3 * mean, "too few samples to see a 1% bias: {se}");
+            assert!((mean - expected).abs() < 4.0 * se, "albedo {mean} vs {expected} +- {se}");
+            assert!(mean < 1.0, "energy: {mean}");
+        }
+        // One-sided: black from behind.
+        let back = Vec3A::new(0.3, 0.1, -0.9).normalize();
+        assert!(b.sample(back, Vec2::ZERO, 0.5, Vec2::splat(0.3)).is_none());
+        assert_eq!(b.eval(back, Vec3A::Z, Vec2::ZERO), Spectrum::ZERO);
     }
 
     #[test]

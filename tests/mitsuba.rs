@@ -264,3 +264,10 @@ fn mitsuba_m_thin_dielectric_counts_no_depth() {
 fn mitsuba_k_fog_room_walls_without_media() {
     validate("k-fog-room-walls", 4096);
 }
+
+/// Mitsuba's smooth `plastic`: default coating over a coloured base, and a nonlinear one with
+/// a checkered base and a tinted specular reflection, in fog.
+#[test]
+fn mitsuba_n_smooth_plastic_in_fog() {
+    validate("n-plastic-fog", 2048);
+}

@@ -4,7 +4,7 @@
 use super::desc::*;
 use super::{RenderSettings, Scene, SceneError, Sources, Surface};
 use crate::accel::Bvh;
-use crate::bsdf::{Bsdf, Texture};
+use crate::bsdf::{Bsdf, Plastic, Texture};
 use crate::camera::Camera;
 use crate::lights::{EnvMap, Light};
 use crate::math::{Frame, Spectrum};
@@ -354,59 +354,80 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
     let diffuse_only =
         [("reflectance", d.reflectance.is_some()), ("two_sided", d.two_sided.is_some())];
     let dielectric_only = [("int_ior", d.int_ior.is_some()), ("ext_ior", d.ext_ior.is_some())];
+    let plastic_only = [
+        ("diffuse_reflectance", d.diffuse_reflectance.is_some()),
+        ("specular_reflectance", d.specular_reflectance.is_some()),
+        ("nonlinear", d.nonlinear.is_some()),
+    ];
     match d.kind.as_str() {
         "null" => {
-            cx.only("null surfaces", &[diffuse_only.as_slice(), &dielectric_only].concat())?;
+            cx.only(
+                "null surfaces",
+                &[diffuse_only.as_slice(), &dielectric_only, &plastic_only].concat(),
+            )?;
             Ok(Bsdf::Null)
         }
         "diffuse" => {
-            cx.only("diffuse surfaces", &dielectric_only)?;
-            let reflectance = match &d.reflectance {
-                None => Texture::Constant(Spectrum::splat(0.5)),
-                Some(TextureDesc::Constant(c)) => {
-                    Texture::Constant(cx.colour("reflectance", *c, Some(1.0))?)
-                }
-                Some(TextureDesc::Checkerboard(c)) => {
-                    if c.kind != "checkerboard" {
-                        return cx.err(format!("unknown texture `{}`; use checkerboard", c.kind));
-                    }
-                    let scale = c.scale.unwrap_or([1.0, 1.0]);
-                    cx.finite("checkerboard scale", &scale)?;
-                    Texture::Checkerboard {
-                        color0: cx.colour(
-                            "color0",
-                            c.color0.unwrap_or(Rgb::Grey(0.4)),
-                            Some(1.0),
-                        )?,
-                        color1: cx.colour(
-                            "color1",
-                            c.color1.unwrap_or(Rgb::Grey(0.2)),
-                            Some(1.0),
-                        )?,
-                        scale: Vec2::from_array(scale),
-                    }
-                }
-            };
+            cx.only("diffuse surfaces", &[dielectric_only.as_slice(), &plastic_only].concat())?;
+            let reflectance = texture(cx, "reflectance", d.reflectance.as_ref())?;
             Ok(Bsdf::Diffuse { reflectance, two_sided: d.two_sided.unwrap_or(false) })
         }
         "dielectric" | "thindielectric" => {
-            cx.only(&format!("{} surfaces", d.kind), &diffuse_only)?;
+            cx.only(
+                &format!("{} surfaces", d.kind),
+                &[diffuse_only.as_slice(), &plastic_only].concat(),
+            )?;
             // Mitsuba's defaults: BK7 glass inside, air outside.
-            let (int, ext) = (d.int_ior.unwrap_or(1.5046), d.ext_ior.unwrap_or(1.000277));
-            if !(int > 0.0 && ext > 0.0 && int.is_finite() && ext.is_finite()) {
-                return cx.err("indices of refraction must be positive");
-            }
-            let eta = int / ext;
+            let eta = relative_ior(cx, d, 1.5046)?;
             Ok(if d.kind == "dielectric" {
                 Bsdf::Dielectric { eta }
             } else {
                 Bsdf::ThinDielectric { eta }
             })
         }
+        "plastic" => {
+            cx.only("plastic surfaces", &diffuse_only)?;
+            let diffuse = texture(cx, "diffuse_reflectance", d.diffuse_reflectance.as_ref())?;
+            let specular = d.specular_reflectance.unwrap_or(Rgb::Grey(1.0));
+            let specular = cx.colour("specular_reflectance", specular, Some(1.0))?;
+            // Mitsuba's defaults: polypropylene inside, air outside.
+            let eta = relative_ior(cx, d, 1.49)?;
+            Ok(Bsdf::Plastic(Plastic::new(diffuse, specular, eta, d.nonlinear.unwrap_or(false))))
+        }
         other => cx.err(format!(
-            "unknown bsdf type `{other}`; use null, diffuse, dielectric or thindielectric"
+            "unknown bsdf type `{other}`; use null, diffuse, dielectric, thindielectric or plastic"
         )),
     }
+}
+
+/// Interior over exterior index of refraction, with Mitsuba's default interior `int` and air
+/// outside.
+fn relative_ior(cx: &Ctx<'_>, d: &BsdfDesc, int: f32) -> Result<f32> {
+    let (int, ext) = (d.int_ior.unwrap_or(int), d.ext_ior.unwrap_or(1.000277));
+    if !(int > 0.0 && ext > 0.0 && int.is_finite() && ext.is_finite()) {
+        return cx.err("indices of refraction must be positive");
+    }
+    Ok(int / ext)
+}
+
+/// A reflectance texture `name` (0.5 grey when absent, as in Mitsuba).
+fn texture(cx: &Ctx<'_>, name: &str, d: Option<&TextureDesc>) -> Result<Texture> {
+    Ok(match d {
+        None => Texture::Constant(Spectrum::splat(0.5)),
+        Some(TextureDesc::Constant(c)) => Texture::Constant(cx.colour(name, *c, Some(1.0))?),
+        Some(TextureDesc::Checkerboard(c)) => {
+            if c.kind != "checkerboard" {
+                return cx.err(format!("unknown texture `{}`; use checkerboard", c.kind));
+            }
+            let scale = c.scale.unwrap_or([1.0, 1.0]);
+            cx.finite("checkerboard scale", &scale)?;
+            Texture::Checkerboard {
+                color0: cx.colour("color0", c.color0.unwrap_or(Rgb::Grey(0.4)), Some(1.0))?,
+                color1: cx.colour("color1", c.color1.unwrap_or(Rgb::Grey(0.2)), Some(1.0))?,
+                scale: Vec2::from_array(scale),
+            }
+        }
+    })
 }
 
 fn phase(cx: &Ctx<'_>, d: Option<&PhaseDesc>) -> Result<PhaseFunction> {

@@ -181,17 +181,23 @@ pub enum TransformStep {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BsdfDesc {
-    /// "null", "diffuse", "dielectric" or "thindielectric".
+    /// "null", "diffuse", "dielectric", "thindielectric" or "plastic".
     #[serde(rename = "type")]
     pub kind: String,
     /// Diffuse: reflectance (a colour or a checkerboard table).
     pub reflectance: Option<TextureDesc>,
     /// Diffuse: reflect on both sides.
     pub two_sided: Option<bool>,
-    /// Dielectric, thindielectric: interior (slab) index of refraction.
+    /// Dielectric, thindielectric, plastic: interior (slab, coating) index of refraction.
     pub int_ior: Option<f32>,
-    /// Dielectric, thindielectric: exterior index of refraction.
+    /// Dielectric, thindielectric, plastic: exterior index of refraction.
     pub ext_ior: Option<f32>,
+    /// Plastic: the base's albedo (a colour or a checkerboard table).
+    pub diffuse_reflectance: Option<TextureDesc>,
+    /// Plastic: a factor on the coating's specular reflection.
+    pub specular_reflectance: Option<Rgb>,
+    /// Plastic: Mitsuba's `nonlinear` (internal reflections tint the base).
+    pub nonlinear: Option<bool>,
 }
 
 /// A reflectance: a colour or `{ type = "checkerboard", ... }`.

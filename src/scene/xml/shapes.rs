@@ -14,7 +14,8 @@ use std::rc::Rc;
 use toml::Spanned;
 
 const SHAPES: &str = "sphere, cube, rectangle, disk, obj or ply";
-const BSDFS: &str = "null, diffuse, dielectric, thindielectric, or twosided around diffuse";
+const BSDFS: &str =
+    "null, diffuse, dielectric, thindielectric, plastic, or twosided around diffuse";
 const EMITTERS: &str = "point, spot, directional, constant, envmap, and area inside a <shape>";
 
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
@@ -82,13 +83,15 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
             kind: "diffuse".into(),
             reflectance: Some(TextureDesc::Constant(Rgb::Grey(0.0))),
             two_sided: None,
-            int_ior: None,
-            ext_ior: None,
+            ..Default::default()
         }),
         b => b,
     };
-    let textured =
-        bsdf.as_ref().is_some_and(|b| matches!(b.reflectance, Some(TextureDesc::Checkerboard(_))));
+    let textured = bsdf.as_ref().is_some_and(|b| {
+        [&b.reflectance, &b.diffuse_reflectance]
+            .iter()
+            .any(|t| matches!(t, Some(TextureDesc::Checkerboard(_))))
+    });
     if o.kind == "ply" && textured {
         return Err(p.err(
             "textures on PLY meshes are not supported (their texture coordinates are not \
@@ -118,39 +121,13 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
     let mut d = BsdfDesc { kind: o.kind.clone(), ..Default::default() };
     match o.kind.as_str() {
         "null" => {}
-        "diffuse" => {
-            d.reflectance = match p.raw("reflectance") {
-                None => None,
-                Some(prop) => match &prop.value {
-                    Value::Object(t) if t.tag == "texture" => Some(texture(t)?),
-                    _ => Some(TextureDesc::Constant(
-                        color(prop, &o.tag)
-                            .ok_or_else(|| p.wrong(prop, &format!("{COLOR} or a <texture>")))?,
-                    )),
-                },
-            };
-        }
-        "dielectric" | "thindielectric" => {
-            for (name, slot) in [("int_ior", &mut d.int_ior), ("ext_ior", &mut d.ext_ior)] {
-                *slot = match p.raw(name) {
-                    None => None,
-                    Some(prop) => match &prop.value {
-                        Value::Float(v) => Some(*v as f32),
-                        Value::Integer(v) => Some(*v as f32),
-                        Value::String(material) => match named_ior(material) {
-                            Some(ior) => Some(ior),
-                            None => {
-                                return Err(prop.pos.err(format!(
-                                    "{name} \"{material}\" is not one of Mitsuba's named \
-                                     materials ({}); give the index as a <float>",
-                                    NAMED_IORS.map(|(n, _)| n).join(", ")
-                                )));
-                            }
-                        },
-                        _ => return Err(p.wrong(prop, "a <float> or a material's name")),
-                    },
-                };
-            }
+        "diffuse" => d.reflectance = reflectance(&p, "reflectance")?,
+        "dielectric" | "thindielectric" => (d.int_ior, d.ext_ior) = iors(&p)?,
+        "plastic" => {
+            d.diffuse_reflectance = reflectance(&p, "diffuse_reflectance")?;
+            d.specular_reflectance = p.color("specular_reflectance")?;
+            (d.int_ior, d.ext_ior) = iors(&p)?;
+            d.nonlinear = p.boolean("nonlinear")?;
         }
         "twosided" => {
             let inner = p.objects("bsdf");
@@ -170,6 +147,44 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
     }
     p.finish()?;
     Ok(d)
+}
+
+/// A reflectance `name`: a colour or a nested `<texture>`.
+fn reflectance(p: &Props<'_>, name: &'static str) -> Result<Option<TextureDesc>> {
+    let Some(prop) = p.raw(name) else { return Ok(None) };
+    Ok(Some(match &prop.value {
+        Value::Object(t) if t.tag == "texture" => texture(t)?,
+        _ => TextureDesc::Constant(
+            color(prop, &p.obj.tag)
+                .ok_or_else(|| p.wrong(prop, &format!("{COLOR} or a <texture>")))?,
+        ),
+    }))
+}
+
+/// `int_ior` and `ext_ior`: numbers, or the names of Mitsuba's materials.
+fn iors(p: &Props<'_>) -> Result<(Option<f32>, Option<f32>)> {
+    let mut out = [None, None];
+    for (name, slot) in ["int_ior", "ext_ior"].into_iter().zip(&mut out) {
+        *slot = match p.raw(name) {
+            None => None,
+            Some(prop) => match &prop.value {
+                Value::Float(v) => Some(*v as f32),
+                Value::Integer(v) => Some(*v as f32),
+                Value::String(material) => match named_ior(material) {
+                    Some(ior) => Some(ior),
+                    None => {
+                        return Err(prop.pos.err(format!(
+                            "{name} \"{material}\" is not one of Mitsuba's named materials ({}); \
+                             give the index as a <float>",
+                            NAMED_IORS.map(|(n, _)| n).join(", ")
+                        )));
+                    }
+                },
+                _ => return Err(p.wrong(prop, "a <float> or a material's name")),
+            },
+        };
+    }
+    Ok((out[0], out[1]))
 }
 
 /// A `<texture>`: the checkerboard, scaled by a `to_uv` transform.
