@@ -88,6 +88,8 @@ pub struct Plastic {
     pub eta: f32,
     /// Mitsuba's `nonlinear`: the internal reflections at the coating tint the base's colour.
     pub nonlinear: bool,
+    /// Whether the back side is the same plastic (Mitsuba's `twosided`), not black.
+    pub two_sided: bool,
     /// The coating's reflectance of diffuse light from inside.
     fdr_int: f32,
     /// How strongly the specular lobe is sampled against the diffuse one.
@@ -100,7 +102,18 @@ impl Plastic {
         let (d, s) = (channel_mean(diffuse.mean()), channel_mean(specular));
         let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
         let fdr_int = fresnel_diffuse_reflectance(1.0 / eta);
-        Self { diffuse, specular, eta, nonlinear, fdr_int, specular_weight }
+        Self { diffuse, specular, eta, nonlinear, two_sided: false, fdr_int, specular_weight }
+    }
+
+    /// The same plastic on both sides, or only on the front.
+    pub fn with_two_sided(self, two_sided: bool) -> Self {
+        Self { two_sided, ..self }
+    }
+
+    /// The directions `wo`, `wi` as the front side sees them: both mirrored through the surface
+    /// where a two-sided plastic is seen from behind.
+    fn front(&self, wo: Vec3A, wi: Vec3A) -> (Vec3A, Vec3A, bool) {
+        if self.two_sided && wo.z < 0.0 { (mirror(wo), mirror(wi), true) } else { (wo, wi, false) }
     }
 
     /// The probability of sampling the specular lobe for `cos_o` (Fresnel times its weight).
@@ -120,6 +133,11 @@ impl Plastic {
         };
         d / inner * ((1.0 - f_o) * (1.0 - f_i) / (self.eta * self.eta) * FRAC_1_PI)
     }
+}
+
+/// `v` mirrored through the surface plane.
+fn mirror(v: Vec3A) -> Vec3A {
+    Vec3A::new(v.x, v.y, -v.z)
 }
 
 /// The mean of the three channels.
@@ -187,6 +205,7 @@ impl Bsdf {
                 reflectance.eval(uv) * (FRAC_1_PI * wi_z)
             }
             Bsdf::Plastic(p) => {
+                let (wo, wi, _) = p.front(wo, wi);
                 if wo.z <= 0.0 || wi.z <= 0.0 {
                     return Spectrum::ZERO;
                 }
@@ -207,6 +226,7 @@ impl Bsdf {
                 if wo_z <= 0.0 || wi_z <= 0.0 { 0.0 } else { FRAC_1_PI * wi_z }
             }
             Bsdf::Plastic(p) => {
+                let (wo, wi, _) = p.front(wo, wi);
                 if wo.z <= 0.0 || wi.z <= 0.0 {
                     return 0.0;
                 }
@@ -240,7 +260,11 @@ impl Bsdf {
             }
             Bsdf::Dielectric { eta } => sample_dielectric(eta, wo, u1),
             Bsdf::ThinDielectric { eta } => Some(sample_thin_dielectric(eta, wo, u1)),
-            Bsdf::Plastic(p) => sample_plastic(&p, wo, uv, u1, u2),
+            Bsdf::Plastic(p) => {
+                let (wo, _, flipped) = p.front(wo, wo);
+                let bs = sample_plastic(&p, wo, uv, u1, u2)?;
+                Some(BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs })
+            }
         }
     }
 }
@@ -460,10 +484,23 @@ mod tests {
             assert!((mean - expected).abs() < 4.0 * se, "albedo {mean} vs {expected} +- {se}");
             assert!(mean < 1.0, "energy: {mean}");
         }
-        // One-sided: black from behind.
+        // One-sided: black from behind; two-sided: the front mirrored.
         let back = Vec3A::new(0.3, 0.1, -0.9).normalize();
         assert!(b.sample(back, Vec2::ZERO, 0.5, Vec2::splat(0.3)).is_none());
         assert_eq!(b.eval(back, Vec3A::Z, Vec2::ZERO), Spectrum::ZERO);
+        let two = Bsdf::Plastic(p.with_two_sided(true));
+        for u1 in [0.01, 0.99] {
+            let (f, r) =
+                (two.sample(back, Vec2::ZERO, u1, Vec2::splat(0.3)).unwrap(), mirror(back));
+            let front = b.sample(r, Vec2::ZERO, u1, Vec2::splat(0.3)).unwrap();
+            assert_eq!(
+                (f.wi, f.weight, f.pdf, f.delta),
+                (mirror(front.wi), front.weight, front.pdf, front.delta)
+            );
+            let wi = mirror(front.wi);
+            assert_eq!(two.eval(back, wi, Vec2::ZERO), b.eval(r, front.wi, Vec2::ZERO));
+            assert_eq!(two.pdf(back, wi), b.pdf(r, front.wi));
+        }
     }
 
     #[test]

@@ -848,3 +848,42 @@ fn named_indices_of_refraction() {
         "{e}"
     );
 }
+
+/// Mitsuba's `plastic` with its defaults (polypropylene in air, base 0.5, specular 1), its
+/// parameters, and wrapped in `twosided`; `twosided` around a BSDF zerovar has no two-sided
+/// form of is refused.
+#[test]
+fn plastic_defaults_parameters_and_two_sides() {
+    use zerovar::bsdf::{Bsdf, Plastic, Texture};
+    use zerovar::math::Spectrum;
+    let scene = |bsdf: &str| {
+        format!(
+            "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\
+             </sensor><shape type=\"sphere\">{bsdf}</shape></scene>"
+        )
+    };
+    let s = xml("plastic.xml", &scene("<bsdf type=\"plastic\"/>"), &[]).unwrap();
+    let default = Plastic::new(
+        Texture::Constant(Spectrum::splat(0.5)),
+        Spectrum::ONE,
+        1.49 / 1.000_277,
+        false,
+    );
+    assert_eq!(s.surfaces()[0].bsdf, Bsdf::Plastic(default));
+    let given = "<bsdf type=\"twosided\"><bsdf type=\"plastic\"><rgb name=\"diffuse_reflectance\" \
+                 value=\"0.2, 0.4, 0.6\"/><float name=\"specular_reflectance\" value=\"0.5\"/>\
+                 <string name=\"int_ior\" value=\"water\"/><boolean name=\"nonlinear\" value=\"true\"/>\
+                 </bsdf></bsdf>";
+    let s = xml("plastic-2.xml", &scene(given), &[]).unwrap();
+    let expected = Plastic::new(
+        Texture::Constant(Spectrum::new(0.2, 0.4, 0.6)),
+        Spectrum::splat(0.5),
+        1.333 / 1.000_277,
+        true,
+    )
+    .with_two_sided(true);
+    assert_eq!(s.surfaces()[0].bsdf, Bsdf::Plastic(expected));
+    let rough = "<bsdf type=\"twosided\"><bsdf type=\"dielectric\"/></bsdf>";
+    let e = xml("plastic-3.xml", &scene(rough), &[]).unwrap_err().to_string();
+    assert!(e.contains("two-sided surfaces are diffuse or plastic, not `dielectric`"), "{e}");
+}

@@ -386,13 +386,14 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
             })
         }
         "plastic" => {
-            cx.only("plastic surfaces", &diffuse_only)?;
+            cx.only("plastic surfaces", &[("reflectance", d.reflectance.is_some())])?;
             let diffuse = texture(cx, "diffuse_reflectance", d.diffuse_reflectance.as_ref())?;
             let specular = d.specular_reflectance.unwrap_or(Rgb::Grey(1.0));
             let specular = cx.colour("specular_reflectance", specular, Some(1.0))?;
             // Mitsuba's defaults: polypropylene inside, air outside.
             let eta = relative_ior(cx, d, 1.49)?;
-            Ok(Bsdf::Plastic(Plastic::new(diffuse, specular, eta, d.nonlinear.unwrap_or(false))))
+            let plastic = Plastic::new(diffuse, specular, eta, d.nonlinear.unwrap_or(false));
+            Ok(Bsdf::Plastic(plastic.with_two_sided(d.two_sided.unwrap_or(false))))
         }
         other => cx.err(format!(
             "unknown bsdf type `{other}`; use null, diffuse, dielectric, thindielectric or plastic"

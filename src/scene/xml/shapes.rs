@@ -15,7 +15,7 @@ use toml::Spanned;
 
 const SHAPES: &str = "sphere, cube, rectangle, disk, obj or ply";
 const BSDFS: &str =
-    "null, diffuse, dielectric, thindielectric, plastic, or twosided around diffuse";
+    "null, diffuse, dielectric, thindielectric, plastic, or twosided around diffuse or plastic";
 const EMITTERS: &str = "point, spot, directional, constant, envmap, and area inside a <shape>";
 
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
@@ -135,9 +135,9 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
             let [(_, inner)] = inner.as_slice() else {
                 return Err(p.err("twosided wraps exactly one <bsdf>"));
             };
-            if inner.kind != "diffuse" {
+            if inner.kind != "diffuse" && inner.kind != "plastic" {
                 return Err(p.err(format!(
-                    "zerovar's two-sided surfaces are diffuse only, not `{}`",
+                    "zerovar's two-sided surfaces are diffuse or plastic, not `{}`",
                     inner.kind
                 )));
             }
