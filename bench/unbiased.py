@@ -40,6 +40,8 @@ BLOCK = 8
 # Fewest rounds (runs per mode) per scene: with 8, a t beyond 4 has p 0.005 rather than 0.057
 # with 3, and the conversion to z below takes care of the rest.
 MIN_ROUNDS = 8
+# Relative rounding of an image value (32-bit floats, averaged over samples and combined).
+ROUNDING = 1e-6
 # Gauss-Legendre nodes and weights on (0, 1), for Student's t integrals.
 _X, _W = np.polynomial.legendre.leggauss(96)
 _X, _W = 0.5 * (_X + 1.0), 0.5 * _W
@@ -131,7 +133,9 @@ def compare(guided, unguided):
         rel_se = np.where(um > 0, se / um, 0.0)
     bm, bv = guided.stats(guided.blocks)
     ubm, ubv = unguided.stats(unguided.blocks)
-    bse = np.sqrt(bv + ubv)
+    # A floor of float rounding (blocks of constant background are equal in every run up to
+    # the last bits, and a zero spread would turn those bits into any z).
+    bse = np.sqrt(bv + ubv + (ROUNDING * ubm) ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         bz = np.where(bse > 0, (bm - ubm) / bse, 0.0)
     dof = len(guided.means) - 1

@@ -271,3 +271,11 @@ fn mitsuba_k_fog_room_walls_without_media() {
 fn mitsuba_n_smooth_plastic_in_fog() {
     validate("n-plastic-fog", 2048);
 }
+
+/// Mitsuba's `roughplastic` (GGX and Beckmann, nonlinear) and `roughdielectric` around a medium,
+/// in fog. Glossy highlights of the area light make the pixels' samples heavy-tailed: the
+/// samples are many so that their standard errors are trustworthy.
+#[test]
+fn mitsuba_o_rough_plastic_and_glass_in_fog() {
+    validate("o-rough-fog", 16384);
+}

@@ -377,11 +377,11 @@ fn bad_input_names_the_place_and_the_fix() {
             &["<ref id=\"glass\"> names no object defined before it"],
         ),
         (
-            "rough",
+            "conductor",
             radius,
-            "<bsdf type=\"roughdielectric\"/>",
-            "rough.xml:6:9",
-            &["unsupported bsdf `roughdielectric`", "thindielectric"],
+            "<bsdf type=\"roughconductor\"/>",
+            "conductor.xml:6:9",
+            &["unsupported bsdf `roughconductor`", "roughplastic"],
         ),
         (
             "thin",
@@ -849,6 +849,14 @@ fn named_indices_of_refraction() {
     );
 }
 
+/// A scene of one sphere with `bsdf`.
+fn sphere_with(bsdf: &str) -> String {
+    format!(
+        "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\
+         </sensor><shape type=\"sphere\">{bsdf}</shape></scene>"
+    )
+}
+
 /// Mitsuba's `plastic` with its defaults (polypropylene in air, base 0.5, specular 1), its
 /// parameters, and wrapped in `twosided`; `twosided` around a BSDF zerovar has no two-sided
 /// form of is refused.
@@ -856,13 +864,7 @@ fn named_indices_of_refraction() {
 fn plastic_defaults_parameters_and_two_sides() {
     use zerovar::bsdf::{Bsdf, Plastic, Texture};
     use zerovar::math::Spectrum;
-    let scene = |bsdf: &str| {
-        format!(
-            "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\
-             </sensor><shape type=\"sphere\">{bsdf}</shape></scene>"
-        )
-    };
-    let s = xml("plastic.xml", &scene("<bsdf type=\"plastic\"/>"), &[]).unwrap();
+    let s = xml("plastic.xml", &sphere_with("<bsdf type=\"plastic\"/>"), &[]).unwrap();
     let default = Plastic::new(
         Texture::Constant(Spectrum::splat(0.5)),
         Spectrum::ONE,
@@ -874,7 +876,7 @@ fn plastic_defaults_parameters_and_two_sides() {
                  value=\"0.2, 0.4, 0.6\"/><float name=\"specular_reflectance\" value=\"0.5\"/>\
                  <string name=\"int_ior\" value=\"water\"/><boolean name=\"nonlinear\" value=\"true\"/>\
                  </bsdf></bsdf>";
-    let s = xml("plastic-2.xml", &scene(given), &[]).unwrap();
+    let s = xml("plastic-2.xml", &sphere_with(given), &[]).unwrap();
     let expected = Plastic::new(
         Texture::Constant(Spectrum::new(0.2, 0.4, 0.6)),
         Spectrum::splat(0.5),
@@ -884,6 +886,58 @@ fn plastic_defaults_parameters_and_two_sides() {
     .with_two_sided(true);
     assert_eq!(s.surfaces()[0].bsdf, Bsdf::Plastic(expected));
     let rough = "<bsdf type=\"twosided\"><bsdf type=\"dielectric\"/></bsdf>";
-    let e = xml("plastic-3.xml", &scene(rough), &[]).unwrap_err().to_string();
-    assert!(e.contains("two-sided surfaces are diffuse or plastic, not `dielectric`"), "{e}");
+    let e = xml("plastic-3.xml", &sphere_with(rough), &[]).unwrap_err().to_string();
+    assert!(
+        e.contains("two-sided surfaces are diffuse, plastic or roughplastic, not `dielectric`"),
+        "{e}"
+    );
+}
+
+/// `roughplastic` and `roughdielectric`: Mitsuba's defaults (Beckmann, alpha 0.1,
+/// polypropylene and BK7 inside, air outside), given parameters, twosided rough plastic, and
+/// clear errors for what zerovar lacks.
+#[test]
+fn rough_bsdfs_defaults_parameters_and_errors() {
+    use zerovar::bsdf::{Bsdf, Microfacet, MicrofacetKind, RoughDielectric, RoughPlastic, Texture};
+    use zerovar::math::Spectrum;
+    let beckmann = Microfacet { kind: MicrofacetKind::Beckmann, alpha: 0.1 };
+    let s = xml("rough.xml", &sphere_with("<bsdf type=\"roughplastic\"/>"), &[]).unwrap();
+    let grey = Texture::Constant(Spectrum::splat(0.5));
+    let default = RoughPlastic::new(grey, Spectrum::ONE, 1.49 / 1.000_277, false, beckmann);
+    assert_eq!(s.surfaces()[0].bsdf, Bsdf::RoughPlastic(default));
+    let s = xml("rough-2.xml", &sphere_with("<bsdf type=\"roughdielectric\"/>"), &[]).unwrap();
+    let glass = RoughDielectric { microfacet: beckmann, eta: 1.5046 / 1.000_277 };
+    assert_eq!(s.surfaces()[0].bsdf, Bsdf::RoughDielectric(glass));
+    let given = "<bsdf type=\"twosided\"><bsdf type=\"roughplastic\"><string name=\"distribution\" \
+                 value=\"GGX\"/><float name=\"alpha\" value=\"0.3\"/><boolean name=\"sample_visible\" \
+                 value=\"false\"/><float name=\"int_ior\" value=\"1.5\"/></bsdf></bsdf>";
+    let s = xml("rough-3.xml", &sphere_with(given), &[]).unwrap();
+    let ggx = Microfacet { kind: MicrofacetKind::Ggx, alpha: 0.3 };
+    let expected = RoughPlastic::new(grey, Spectrum::ONE, 1.5 / 1.000_277, false, ggx);
+    assert_eq!(s.surfaces()[0].bsdf, Bsdf::RoughPlastic(expected.with_two_sided(true)));
+    for (bsdf, needle) in [
+        (
+            "<bsdf type=\"roughdielectric\"><float name=\"alpha_u\" value=\"0.1\"/>\
+             <float name=\"alpha_v\" value=\"0.2\"/></bsdf>",
+            "anisotropic roughness (alpha_u, alpha_v) is not supported",
+        ),
+        (
+            "<bsdf type=\"roughplastic\"><string name=\"distribution\" value=\"phong\"/></bsdf>",
+            "unknown microfacet distribution `phong`; use beckmann or ggx",
+        ),
+        (
+            "<bsdf type=\"roughdielectric\"><float name=\"alpha\" value=\"0\"/></bsdf>",
+            "alpha 0 is not a roughness zerovar renders: give at least 0.0001",
+        ),
+        (
+            "<bsdf type=\"roughdielectric\"><float name=\"int_ior\" value=\"1.2\"/>\
+             <float name=\"ext_ior\" value=\"1.2\"/></bsdf>",
+            "a rough dielectric needs int_ior and ext_ior to differ",
+        ),
+        ("<bsdf type=\"roughconductor\"/>", "unknown or unsupported bsdf `roughconductor`"),
+    ] {
+        let e = xml("rough-bad.xml", &sphere_with(bsdf), &[]).unwrap_err().to_string();
+        assert!(e.contains(needle), "{bsdf}: {e}");
+        assert!(e.contains("rough-bad.xml:1:"), "names the file and line: {e}");
+    }
 }

@@ -536,13 +536,14 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         let at = SurfacePoint::new(scene, hit, s.ray.direction);
         let guide = settings.guide;
         let smooth = at.bsdf.has_smooth_component();
-        let loaded = smooth && guide.any() && self.ctx.cache.load(hit.p, self.sampler.next_1d());
+        let guides = smooth && at.bsdf.guides();
+        let loaded = guides && guide.any() && self.ctx.cache.load(hit.p, self.sampler.next_1d());
         self.counters.field_lookups += u64::from(loaded);
         // Surfaces have a share of their own (`render::DEFAULT_SURFACE_ALPHA`).
         let alpha = if guiding { settings.surface_alpha.min(MAX_ALPHA) } else { 0.0 };
         let product =
             guide.directions && alpha > 0.0 && loaded && self.ctx.cache.product_cosine(hit.ns);
-        let mix = if smooth {
+        let mix = if guides {
             Mixture::at(settings, alpha, product, scene, hit.p)
         } else {
             Mixture::NONE
@@ -553,7 +554,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
             direct = sample_light(
                 scene,
                 hit.p,
-                Some(hit.ng),
+                Some(hit),
                 s.medium,
                 self.sampler,
                 self.counters,
@@ -589,7 +590,11 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
     /// A direction at a surface from `mix` around the BSDF; `None` where the BSDF draws none.
     /// The number that chooses the strategy, rescaled, also picks the BSDF's lobe (or the
     /// halo's light), so every branch sees a uniform number.
-    fn surface_direction(&mut self, mix: &Mixture, at: &SurfacePoint) -> Option<DirectionSample> {
+    fn surface_direction(
+        &mut self,
+        mix: &Mixture,
+        at: &SurfacePoint<'_>,
+    ) -> Option<DirectionSample> {
         let (strategy, mut u1) = if mix.mixes() {
             mix.choose(self.sampler.next_1d())
         } else {
@@ -597,7 +602,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         };
         // A thin dielectric's transmission was already taken as a null crossing
         // (`passes_straight`): what scatters here reflects, as 0 draws its reflection.
-        if matches!(at.bsdf, Bsdf::ThinDielectric { .. })
+        if matches!(*at.bsdf, Bsdf::ThinDielectric { .. })
             && !self.scene.settings.surface_events_only
         {
             u1 = 0.0;
@@ -642,17 +647,17 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
 
 /// A surface hit as the BSDF sees it: the BSDF, its shading frame, the outgoing direction in
 /// that frame, and the texture coordinates.
-struct SurfacePoint {
-    bsdf: Bsdf,
+struct SurfacePoint<'a> {
+    bsdf: &'a Bsdf,
     frame: Frame,
     wo: Vec3A,
     uv: Vec2,
 }
 
-impl SurfacePoint {
-    fn new(scene: &Scene, hit: &SurfaceHit, ray_dir: Vec3A) -> Self {
+impl<'a> SurfacePoint<'a> {
+    fn new(scene: &'a Scene, hit: &SurfaceHit, ray_dir: Vec3A) -> Self {
         let frame = Frame::from_z(hit.ns);
-        let bsdf = scene.surfaces[hit.shape as usize].bsdf;
+        let bsdf = &scene.surfaces[hit.shape as usize].bsdf;
         SurfacePoint { bsdf, frame, wo: frame.to_local(-ray_dir), uv: hit.uv }
     }
 
@@ -854,7 +859,7 @@ impl DirectSample {
 fn sample_light(
     scene: &Scene,
     p: Vec3A,
-    ng: Option<Vec3A>,
+    surface: Option<&SurfaceHit>,
     medium: Option<u32>,
     sampler: &mut Sampler,
     counters: &mut Counters,
@@ -883,7 +888,9 @@ fn sample_light(
     if f.max_element() <= 0.0 {
         return DirectSample::NONE;
     }
-    let origin = ng.map_or(p, |n| offset_origin(p, n, ls.wi));
+    let origin = surface.map_or(p, |h| offset_origin(p, h.ng, ls.wi));
+    // A light seen through a transmitting surface is reached through the medium beyond it.
+    let medium = surface.map_or(medium, |h| scene.medium_after(h, ls.wi, medium));
     // Aim from the offset origin at the sampled point itself: the offset moves the origin
     // towards the light, and along `wi` the light's own surface would then lie closer than
     // `distance`, by offset / cos at the light, and block the ray (far from a light, where the

@@ -4,7 +4,9 @@
 use super::desc::*;
 use super::{RenderSettings, Scene, SceneError, Sources, Surface};
 use crate::accel::Bvh;
-use crate::bsdf::{Bsdf, Plastic, Texture};
+use crate::bsdf::{
+    Bsdf, MIN_ALPHA, Microfacet, MicrofacetKind, Plastic, RoughDielectric, RoughPlastic, Texture,
+};
 use crate::camera::Camera;
 use crate::lights::{EnvMap, Light};
 use crate::math::{Frame, Spectrum};
@@ -359,46 +361,87 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
         ("specular_reflectance", d.specular_reflectance.is_some()),
         ("nonlinear", d.nonlinear.is_some()),
     ];
+    let rough_only = [("distribution", d.distribution.is_some()), ("alpha", d.alpha.is_some())];
+    let what = format!("{} surfaces", d.kind);
     match d.kind.as_str() {
         "null" => {
             cx.only(
-                "null surfaces",
-                &[diffuse_only.as_slice(), &dielectric_only, &plastic_only].concat(),
+                &what,
+                &[diffuse_only.as_slice(), &dielectric_only, &plastic_only, &rough_only].concat(),
             )?;
             Ok(Bsdf::Null)
         }
         "diffuse" => {
-            cx.only("diffuse surfaces", &[dielectric_only.as_slice(), &plastic_only].concat())?;
+            cx.only(&what, &[dielectric_only.as_slice(), &plastic_only, &rough_only].concat())?;
             let reflectance = texture(cx, "reflectance", d.reflectance.as_ref())?;
             Ok(Bsdf::Diffuse { reflectance, two_sided: d.two_sided.unwrap_or(false) })
         }
-        "dielectric" | "thindielectric" => {
-            cx.only(
-                &format!("{} surfaces", d.kind),
-                &[diffuse_only.as_slice(), &plastic_only].concat(),
-            )?;
+        "dielectric" | "thindielectric" | "roughdielectric" => {
+            let rough = d.kind == "roughdielectric";
+            let other = if rough { &[][..] } else { &rough_only[..] };
+            cx.only(&what, &[diffuse_only.as_slice(), &plastic_only, other].concat())?;
             // Mitsuba's defaults: BK7 glass inside, air outside.
             let eta = relative_ior(cx, d, 1.5046)?;
-            Ok(if d.kind == "dielectric" {
-                Bsdf::Dielectric { eta }
-            } else {
-                Bsdf::ThinDielectric { eta }
+            Ok(match d.kind.as_str() {
+                "dielectric" => Bsdf::Dielectric { eta },
+                "thindielectric" => Bsdf::ThinDielectric { eta },
+                _ => {
+                    if eta == 1.0 {
+                        return cx.err(
+                            "a rough dielectric needs int_ior and ext_ior to differ; an \
+                             index-matched boundary is a null bsdf",
+                        );
+                    }
+                    Bsdf::RoughDielectric(RoughDielectric { microfacet: microfacet(cx, d)?, eta })
+                }
             })
         }
-        "plastic" => {
-            cx.only("plastic surfaces", &[("reflectance", d.reflectance.is_some())])?;
+        "plastic" | "roughplastic" => {
+            let rough = d.kind == "roughplastic";
+            let other = if rough { &[][..] } else { &rough_only[..] };
+            cx.only(&what, &[&[("reflectance", d.reflectance.is_some())][..], other].concat())?;
             let diffuse = texture(cx, "diffuse_reflectance", d.diffuse_reflectance.as_ref())?;
             let specular = d.specular_reflectance.unwrap_or(Rgb::Grey(1.0));
             let specular = cx.colour("specular_reflectance", specular, Some(1.0))?;
             // Mitsuba's defaults: polypropylene inside, air outside.
             let eta = relative_ior(cx, d, 1.49)?;
-            let plastic = Plastic::new(diffuse, specular, eta, d.nonlinear.unwrap_or(false));
-            Ok(Bsdf::Plastic(plastic.with_two_sided(d.two_sided.unwrap_or(false))))
+            let (nonlinear, two_sided) =
+                (d.nonlinear.unwrap_or(false), d.two_sided.unwrap_or(false));
+            Ok(if rough {
+                let p = RoughPlastic::new(diffuse, specular, eta, nonlinear, microfacet(cx, d)?);
+                Bsdf::RoughPlastic(p.with_two_sided(two_sided))
+            } else {
+                Bsdf::Plastic(
+                    Plastic::new(diffuse, specular, eta, nonlinear).with_two_sided(two_sided),
+                )
+            })
         }
         other => cx.err(format!(
-            "unknown bsdf type `{other}`; use null, diffuse, dielectric, thindielectric or plastic"
+            "unknown bsdf type `{other}`; use null, diffuse, dielectric, thindielectric, plastic, \
+             roughdielectric or roughplastic"
         )),
     }
+}
+
+/// The micro-normals of a rough surface: Mitsuba's `distribution` (default Beckmann) and
+/// `alpha` (default 0.1).
+fn microfacet(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Microfacet> {
+    let kind = match d.distribution.as_deref() {
+        None | Some("beckmann") => MicrofacetKind::Beckmann,
+        Some("ggx") => MicrofacetKind::Ggx,
+        Some(other) => {
+            return cx
+                .err(format!("unknown microfacet distribution `{other}`; use beckmann or ggx"));
+        }
+    };
+    let alpha = d.alpha.unwrap_or(0.1);
+    if !(alpha.is_finite() && alpha >= MIN_ALPHA) {
+        return cx.err(format!(
+            "alpha {alpha} is not a roughness zerovar renders: give at least {MIN_ALPHA} (for a \
+             smooth surface use dielectric or plastic)"
+        ));
+    }
+    Ok(Microfacet { kind, alpha })
 }
 
 /// Interior over exterior index of refraction, with Mitsuba's default interior `int` and air

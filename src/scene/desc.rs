@@ -181,23 +181,29 @@ pub enum TransformStep {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BsdfDesc {
-    /// "null", "diffuse", "dielectric", "thindielectric" or "plastic".
+    /// "null", "diffuse", "dielectric", "thindielectric", "plastic", "roughdielectric" or
+    /// "roughplastic".
     #[serde(rename = "type")]
     pub kind: String,
     /// Diffuse: reflectance (a colour or a checkerboard table).
     pub reflectance: Option<TextureDesc>,
     /// Diffuse: reflect on both sides.
     pub two_sided: Option<bool>,
-    /// Dielectric, thindielectric, plastic: interior (slab, coating) index of refraction.
+    /// Dielectric, thindielectric, plastic and their rough kinds: interior (slab, coating)
+    /// index of refraction.
     pub int_ior: Option<f32>,
-    /// Dielectric, thindielectric, plastic: exterior index of refraction.
+    /// Dielectric, thindielectric, plastic and their rough kinds: exterior index of refraction.
     pub ext_ior: Option<f32>,
-    /// Plastic: the base's albedo (a colour or a checkerboard table).
+    /// Plastic, roughplastic: the base's albedo (a colour or a checkerboard table).
     pub diffuse_reflectance: Option<TextureDesc>,
-    /// Plastic: a factor on the coating's specular reflection.
+    /// Plastic, roughplastic: a factor on the coating's specular reflection.
     pub specular_reflectance: Option<Rgb>,
-    /// Plastic: Mitsuba's `nonlinear` (internal reflections tint the base).
+    /// Plastic, roughplastic: Mitsuba's `nonlinear` (internal reflections tint the base).
     pub nonlinear: Option<bool>,
+    /// Roughdielectric, roughplastic: "beckmann" (the default) or "ggx".
+    pub distribution: Option<String>,
+    /// Roughdielectric, roughplastic: the roughness (default 0.1).
+    pub alpha: Option<f32>,
 }
 
 /// A reflectance: a colour or `{ type = "checkerboard", ... }`.

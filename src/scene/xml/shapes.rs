@@ -14,8 +14,8 @@ use std::rc::Rc;
 use toml::Spanned;
 
 const SHAPES: &str = "sphere, cube, rectangle, disk, obj or ply";
-const BSDFS: &str =
-    "null, diffuse, dielectric, thindielectric, plastic, or twosided around diffuse or plastic";
+const BSDFS: &str = "null, diffuse, dielectric, thindielectric, plastic, roughdielectric, \
+                     roughplastic, or twosided around diffuse, plastic or roughplastic";
 const EMITTERS: &str = "point, spot, directional, constant, envmap, and area inside a <shape>";
 
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
@@ -123,11 +123,18 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
         "null" => {}
         "diffuse" => d.reflectance = reflectance(&p, "reflectance")?,
         "dielectric" | "thindielectric" => (d.int_ior, d.ext_ior) = iors(&p)?,
-        "plastic" => {
+        "roughdielectric" => {
+            (d.int_ior, d.ext_ior) = iors(&p)?;
+            roughness(&p, &mut d)?;
+        }
+        "plastic" | "roughplastic" => {
             d.diffuse_reflectance = reflectance(&p, "diffuse_reflectance")?;
             d.specular_reflectance = p.color("specular_reflectance")?;
             (d.int_ior, d.ext_ior) = iors(&p)?;
             d.nonlinear = p.boolean("nonlinear")?;
+            if o.kind == "roughplastic" {
+                roughness(&p, &mut d)?;
+            }
         }
         "twosided" => {
             let inner = p.objects("bsdf");
@@ -135,9 +142,9 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
             let [(_, inner)] = inner.as_slice() else {
                 return Err(p.err("twosided wraps exactly one <bsdf>"));
             };
-            if inner.kind != "diffuse" && inner.kind != "plastic" {
+            if !["diffuse", "plastic", "roughplastic"].contains(&inner.kind.as_str()) {
                 return Err(p.err(format!(
-                    "zerovar's two-sided surfaces are diffuse or plastic, not `{}`",
+                    "zerovar's two-sided surfaces are diffuse, plastic or roughplastic, not `{}`",
                     inner.kind
                 )));
             }
@@ -147,6 +154,20 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
     }
     p.finish()?;
     Ok(d)
+}
+
+/// A rough surface's `distribution` and `alpha`. `sample_visible` is accepted and has no
+/// effect: zerovar always samples visible normals, which changes noise, not the image.
+fn roughness(p: &Props<'_>, d: &mut BsdfDesc) -> Result<()> {
+    if let Some(prop) = p.raw("alpha_u").or_else(|| p.raw("alpha_v")) {
+        return Err(prop
+            .pos
+            .err("anisotropic roughness (alpha_u, alpha_v) is not supported; give one `alpha`"));
+    }
+    d.distribution = p.string("distribution")?.map(|(s, _)| s.to_lowercase());
+    d.alpha = p.float("alpha")?;
+    p.boolean("sample_visible")?;
+    Ok(())
 }
 
 /// A reflectance `name`: a colour or a nested `<texture>`.

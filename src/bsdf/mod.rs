@@ -1,12 +1,19 @@
 //! Surface scattering: index-matched null boundaries, Lambertian diffuse, smooth dielectric,
 //! Mitsuba's thin dielectric (a slab of negligible thickness: specular reflection, or
-//! transmission straight through) and Mitsuba's smooth plastic (a diffuse base under a smooth
-//! dielectric coating: a specular lobe and a diffuse one, each weighted by Fresnel).
+//! transmission straight through), Mitsuba's smooth plastic (a diffuse base under a smooth
+//! dielectric coating: a specular lobe and a diffuse one, each weighted by Fresnel), and the
+//! rough dielectric and rough plastic of `rough` over the distributions of `microfacet`.
 //!
 //! Directions are in the local shading frame (z = shading normal on the shape's front side) and
 //! both point away from the surface: `wo` towards where the path came from, `wi` where it goes.
 //! Like Mitsuba 3, the diffuse BSDF is one-sided (black seen from the back) unless
 //! `two_sided`, and the dielectric scales transported radiance by 1/eta^2 when refracting.
+
+mod microfacet;
+mod rough;
+
+pub use microfacet::{MIN_ALPHA, Microfacet, MicrofacetKind};
+pub use rough::{RoughDielectric, RoughPlastic};
 
 use crate::math::{Spectrum, cosine_hemisphere};
 use glam::{Vec2, Vec3A};
@@ -51,6 +58,9 @@ impl Texture {
 }
 
 /// A surface's scattering model.
+// Rough plastic carries its coating's table inline: a scene has few surfaces, and the walk
+// borrows them rather than copying.
+#[allow(clippy::large_enum_variant)]
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Bsdf {
     /// No surface at all: a boundary between media that light passes straight through.
@@ -75,6 +85,10 @@ pub enum Bsdf {
     },
     /// Mitsuba's `plastic`: a smooth dielectric coating over a diffuse base, one-sided.
     Plastic(Plastic),
+    /// Mitsuba's `roughdielectric`: a rough boundary between two indices of refraction.
+    RoughDielectric(RoughDielectric),
+    /// Mitsuba's `roughplastic`: a rough dielectric coating over a diffuse base.
+    RoughPlastic(RoughPlastic),
 }
 
 /// The parameters of [`Bsdf::Plastic`], with what it precomputes from them.
@@ -189,7 +203,20 @@ impl Bsdf {
 
     /// Whether next-event estimation can help at this surface.
     pub fn has_smooth_component(&self) -> bool {
-        matches!(self, Bsdf::Diffuse { .. } | Bsdf::Plastic(_))
+        matches!(
+            self,
+            Bsdf::Diffuse { .. }
+                | Bsdf::Plastic(_)
+                | Bsdf::RoughDielectric(_)
+                | Bsdf::RoughPlastic(_)
+        )
+    }
+
+    /// Whether a guiding field of incident radiance can help choose directions here: where the
+    /// BSDF has a diffuse part. A glossy lobe (the rough dielectric's) is narrower than the
+    /// field's mixtures resolve, so its own sampling draws every direction.
+    pub fn guides(&self) -> bool {
+        matches!(self, Bsdf::Diffuse { .. } | Bsdf::Plastic(_) | Bsdf::RoughPlastic(_))
     }
 
     /// BSDF times |cos wi| for a pair of local directions.
@@ -212,6 +239,11 @@ impl Bsdf {
                 let (f_o, f_i) = (fresnel(wo.z, p.eta).0, fresnel(wi.z, p.eta).0);
                 p.diffuse_value(uv, f_o, f_i) * wi.z
             }
+            Bsdf::RoughDielectric(r) => Spectrum::splat(r.eval(wo, wi)),
+            Bsdf::RoughPlastic(ref p) => {
+                let (wo, wi, _) = p.front(wo, wi);
+                p.eval(wo, wi, uv)
+            }
             _ => Spectrum::ZERO,
         }
     }
@@ -231,6 +263,11 @@ impl Bsdf {
                     return 0.0;
                 }
                 (1.0 - p.specular_probability(fresnel(wo.z, p.eta).0)) * FRAC_1_PI * wi.z
+            }
+            Bsdf::RoughDielectric(r) => r.pdf(wo, wi),
+            Bsdf::RoughPlastic(ref p) => {
+                let (wo, wi, _) = p.front(wo, wi);
+                p.pdf(wo, wi)
             }
             _ => 0.0,
         }
@@ -263,6 +300,12 @@ impl Bsdf {
             Bsdf::Plastic(p) => {
                 let (wo, _, flipped) = p.front(wo, wo);
                 let bs = sample_plastic(&p, wo, uv, u1, u2)?;
+                Some(BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs })
+            }
+            Bsdf::RoughDielectric(r) => r.sample(wo, u1, u2),
+            Bsdf::RoughPlastic(ref p) => {
+                let (wo, _, flipped) = p.front(wo, wo);
+                let bs = p.sample(wo, uv, u1, u2)?;
                 Some(BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs })
             }
         }
@@ -306,6 +349,12 @@ fn fresnel(cos_i: f32, eta: f32) -> (f32, f32, f32) {
     let rp = (eta_it * cos_i_abs - cos_t) / (eta_it * cos_i_abs + cos_t);
     let f = 0.5 * (rs * rs + rp * rp);
     (f, if cos_i >= 0.0 { -cos_t } else { cos_t }, eta_it)
+}
+
+/// `v` refracted through a boundary of normal `m`, with the signed cosine `cos_t` and relative
+/// index `eta_it` that [`fresnel`] returned for `v . m`.
+fn refract(v: Vec3A, m: Vec3A, cos_t: f32, eta_it: f32) -> Vec3A {
+    (m * (v.dot(m) / eta_it + cos_t) - v / eta_it).normalize()
 }
 
 fn sample_dielectric(eta: f32, wo: Vec3A, u: f32) -> Option<BsdfSample> {
