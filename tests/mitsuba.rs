@@ -279,3 +279,10 @@ fn mitsuba_n_smooth_plastic_in_fog() {
 fn mitsuba_o_rough_plastic_and_glass_in_fog() {
     validate("o-rough-fog", 16384);
 }
+
+/// Mitsuba's `conductor` and `roughconductor`: named metals, given indices, a tint and a
+/// two-sided rough floor, in fog.
+#[test]
+fn mitsuba_p_metals_in_fog() {
+    validate("p-metal-fog", 16384);
+}

@@ -377,11 +377,11 @@ fn bad_input_names_the_place_and_the_fix() {
             &["<ref id=\"glass\"> names no object defined before it"],
         ),
         (
-            "conductor",
+            "blend",
             radius,
-            "<bsdf type=\"roughconductor\"/>",
-            "conductor.xml:6:9",
-            &["unsupported bsdf `roughconductor`", "roughplastic"],
+            "<bsdf type=\"blendbsdf\"/>",
+            "blend.xml:6:9",
+            &["unsupported bsdf `blendbsdf`", "roughconductor"],
         ),
         (
             "thin",
@@ -888,7 +888,9 @@ fn plastic_defaults_parameters_and_two_sides() {
     let rough = "<bsdf type=\"twosided\"><bsdf type=\"dielectric\"/></bsdf>";
     let e = xml("plastic-3.xml", &sphere_with(rough), &[]).unwrap_err().to_string();
     assert!(
-        e.contains("two-sided surfaces are diffuse, plastic or roughplastic, not `dielectric`"),
+        e.contains(
+            "surfaces are diffuse, plastic, conductor or their rough kinds, not `dielectric`"
+        ),
         "{e}"
     );
 }
@@ -934,10 +936,50 @@ fn rough_bsdfs_defaults_parameters_and_errors() {
              <float name=\"ext_ior\" value=\"1.2\"/></bsdf>",
             "a rough dielectric needs int_ior and ext_ior to differ",
         ),
-        ("<bsdf type=\"roughconductor\"/>", "unknown or unsupported bsdf `roughconductor`"),
+        (
+            "<bsdf type=\"roughconductor\"><string name=\"material\" value=\"unobtainium\"/></bsdf>",
+            "material \"unobtainium\" is not one of Mitsuba's conductors (none, a-C, Ag",
+        ),
+        (
+            "<bsdf type=\"conductor\"><string name=\"material\" value=\"Au\"/>\
+             <float name=\"eta\" value=\"1\"/></bsdf>",
+            "either `material` or `eta` and `k`, not both",
+        ),
+        ("<bsdf type=\"conductor\"><float name=\"alpha\" value=\"0.1\"/></bsdf>", "alpha"),
     ] {
         let e = xml("rough-bad.xml", &sphere_with(bsdf), &[]).unwrap_err().to_string();
         assert!(e.contains(needle), "{bsdf}: {e}");
         assert!(e.contains("rough-bad.xml:1:"), "names the file and line: {e}");
     }
+}
+
+/// `conductor` and `roughconductor`: Mitsuba's default (`none`, a perfect mirror; Beckmann,
+/// alpha 0.1), a named material, given `eta` and `k` (the other defaulting), and twosided.
+#[test]
+fn conductors_defaults_materials_and_sides() {
+    use zerovar::bsdf::{Bsdf, Conductor, Metal, Microfacet, MicrofacetKind, RoughConductor};
+    use zerovar::math::Spectrum;
+    let load =
+        |name: &str, bsdf: &str| xml(name, &sphere_with(bsdf), &[]).unwrap().surfaces()[0].bsdf;
+    let mirror =
+        Metal { eta: Spectrum::ZERO, k: Spectrum::ONE, specular: Spectrum::ONE, two_sided: false };
+    let beckmann = Microfacet { kind: MicrofacetKind::Beckmann, alpha: 0.1 };
+    assert_eq!(load("metal.xml", "<bsdf type=\"conductor\"/>"), Bsdf::Conductor(Conductor(mirror)));
+    assert_eq!(
+        load("metal-2.xml", "<bsdf type=\"roughconductor\"/>"),
+        Bsdf::RoughConductor(RoughConductor { metal: mirror, microfacet: beckmann })
+    );
+    let (eta, k) = Metal::named("Au").unwrap();
+    let gold = "<bsdf type=\"twosided\"><bsdf type=\"roughconductor\"><string name=\"material\" \
+                value=\"Au\"/><string name=\"distribution\" value=\"ggx\"/><float name=\"alpha\" \
+                value=\"0.2\"/><rgb name=\"specular_reflectance\" value=\"0.5, 0.6, 0.7\"/></bsdf></bsdf>";
+    let metal = Metal { eta, k, specular: Spectrum::new(0.5, 0.6, 0.7), two_sided: true };
+    let microfacet = Microfacet { kind: MicrofacetKind::Ggx, alpha: 0.2 };
+    assert_eq!(
+        load("metal-3.xml", gold),
+        Bsdf::RoughConductor(RoughConductor { metal, microfacet })
+    );
+    let given = "<bsdf type=\"conductor\"><rgb name=\"eta\" value=\"0.2, 0.9, 1.1\"/></bsdf>";
+    let metal = Metal { eta: Spectrum::new(0.2, 0.9, 1.1), ..mirror };
+    assert_eq!(load("metal-4.xml", given), Bsdf::Conductor(Conductor(metal)));
 }

@@ -1,17 +1,23 @@
 //! Surface scattering: index-matched null boundaries, Lambertian diffuse, smooth dielectric,
 //! Mitsuba's thin dielectric (a slab of negligible thickness: specular reflection, or
 //! transmission straight through), Mitsuba's smooth plastic (a diffuse base under a smooth
-//! dielectric coating: a specular lobe and a diffuse one, each weighted by Fresnel), and the
-//! rough dielectric and rough plastic of `rough` over the distributions of `microfacet`.
+//! dielectric coating: a specular lobe and a diffuse one, each weighted by Fresnel), the
+//! rough dielectric and rough plastic of `rough` over the distributions of `microfacet`, and
+//! the smooth and rough metals of `conductor`.
 //!
 //! Directions are in the local shading frame (z = shading normal on the shape's front side) and
 //! both point away from the surface: `wo` towards where the path came from, `wi` where it goes.
 //! Like Mitsuba 3, the diffuse BSDF is one-sided (black seen from the back) unless
 //! `two_sided`, and the dielectric scales transported radiance by 1/eta^2 when refracting.
 
+mod conductor;
+mod conductors;
 mod microfacet;
 mod rough;
+#[cfg(test)]
+mod testing;
 
+pub use conductor::{Conductor, Metal, RoughConductor};
 pub use microfacet::{MIN_ALPHA, Microfacet, MicrofacetKind};
 pub use rough::{RoughDielectric, RoughPlastic};
 
@@ -89,6 +95,10 @@ pub enum Bsdf {
     RoughDielectric(RoughDielectric),
     /// Mitsuba's `roughplastic`: a rough dielectric coating over a diffuse base.
     RoughPlastic(RoughPlastic),
+    /// Mitsuba's `conductor`: a metal mirror.
+    Conductor(Conductor),
+    /// Mitsuba's `roughconductor`: a rough metal.
+    RoughConductor(RoughConductor),
 }
 
 /// The parameters of [`Bsdf::Plastic`], with what it precomputes from them.
@@ -209,12 +219,14 @@ impl Bsdf {
                 | Bsdf::Plastic(_)
                 | Bsdf::RoughDielectric(_)
                 | Bsdf::RoughPlastic(_)
+                | Bsdf::RoughConductor(_)
         )
     }
 
     /// Whether a guiding field of incident radiance can help choose directions here: where the
     /// BSDF has a diffuse part. A glossy lobe (the rough dielectric's) is narrower than the
-    /// field's mixtures resolve, so its own sampling draws every direction.
+    /// field's mixtures resolve, so its own sampling draws every direction; so is a rough
+    /// metal's.
     pub fn guides(&self) -> bool {
         matches!(self, Bsdf::Diffuse { .. } | Bsdf::Plastic(_) | Bsdf::RoughPlastic(_))
     }
@@ -240,6 +252,7 @@ impl Bsdf {
                 p.diffuse_value(uv, f_o, f_i) * wi.z
             }
             Bsdf::RoughDielectric(r) => Spectrum::splat(r.eval(wo, wi)),
+            Bsdf::RoughConductor(r) => r.eval(wo, wi),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
                 p.eval(wo, wi, uv)
@@ -265,6 +278,7 @@ impl Bsdf {
                 (1.0 - p.specular_probability(fresnel(wo.z, p.eta).0)) * FRAC_1_PI * wi.z
             }
             Bsdf::RoughDielectric(r) => r.pdf(wo, wi),
+            Bsdf::RoughConductor(r) => r.pdf(wo, wi),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
                 p.pdf(wo, wi)
@@ -303,6 +317,8 @@ impl Bsdf {
                 Some(BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs })
             }
             Bsdf::RoughDielectric(r) => r.sample(wo, u1, u2),
+            Bsdf::Conductor(c) => c.sample(wo),
+            Bsdf::RoughConductor(r) => r.sample(wo, u2),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, _, flipped) = p.front(wo, wo);
                 let bs = p.sample(wo, uv, u1, u2)?;

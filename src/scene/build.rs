@@ -5,7 +5,8 @@ use super::desc::*;
 use super::{RenderSettings, Scene, SceneError, Sources, Surface};
 use crate::accel::Bvh;
 use crate::bsdf::{
-    Bsdf, MIN_ALPHA, Microfacet, MicrofacetKind, Plastic, RoughDielectric, RoughPlastic, Texture,
+    Bsdf, Conductor, MIN_ALPHA, Metal, Microfacet, MicrofacetKind, Plastic, RoughConductor,
+    RoughDielectric, RoughPlastic, Texture,
 };
 use crate::camera::Camera;
 use crate::lights::{EnvMap, Light};
@@ -362,24 +363,36 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
         ("nonlinear", d.nonlinear.is_some()),
     ];
     let rough_only = [("distribution", d.distribution.is_some()), ("alpha", d.alpha.is_some())];
+    let metal_only =
+        [("material", d.material.is_some()), ("eta", d.eta.is_some()), ("k", d.k.is_some())];
     let what = format!("{} surfaces", d.kind);
     match d.kind.as_str() {
         "null" => {
             cx.only(
                 &what,
-                &[diffuse_only.as_slice(), &dielectric_only, &plastic_only, &rough_only].concat(),
+                &[
+                    diffuse_only.as_slice(),
+                    &dielectric_only,
+                    &plastic_only,
+                    &rough_only,
+                    &metal_only,
+                ]
+                .concat(),
             )?;
             Ok(Bsdf::Null)
         }
         "diffuse" => {
-            cx.only(&what, &[dielectric_only.as_slice(), &plastic_only, &rough_only].concat())?;
+            cx.only(
+                &what,
+                &[dielectric_only.as_slice(), &plastic_only, &rough_only, &metal_only].concat(),
+            )?;
             let reflectance = texture(cx, "reflectance", d.reflectance.as_ref())?;
             Ok(Bsdf::Diffuse { reflectance, two_sided: d.two_sided.unwrap_or(false) })
         }
         "dielectric" | "thindielectric" | "roughdielectric" => {
             let rough = d.kind == "roughdielectric";
             let other = if rough { &[][..] } else { &rough_only[..] };
-            cx.only(&what, &[diffuse_only.as_slice(), &plastic_only, other].concat())?;
+            cx.only(&what, &[diffuse_only.as_slice(), &plastic_only, &metal_only, other].concat())?;
             // Mitsuba's defaults: BK7 glass inside, air outside.
             let eta = relative_ior(cx, d, 1.5046)?;
             Ok(match d.kind.as_str() {
@@ -399,7 +412,10 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
         "plastic" | "roughplastic" => {
             let rough = d.kind == "roughplastic";
             let other = if rough { &[][..] } else { &rough_only[..] };
-            cx.only(&what, &[&[("reflectance", d.reflectance.is_some())][..], other].concat())?;
+            cx.only(
+                &what,
+                &[&[("reflectance", d.reflectance.is_some())][..], &metal_only, other].concat(),
+            )?;
             let diffuse = texture(cx, "diffuse_reflectance", d.diffuse_reflectance.as_ref())?;
             let specular = d.specular_reflectance.unwrap_or(Rgb::Grey(1.0));
             let specular = cx.colour("specular_reflectance", specular, Some(1.0))?;
@@ -416,11 +432,54 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
                 )
             })
         }
+        "conductor" | "roughconductor" => {
+            let rough = d.kind == "roughconductor";
+            let other = if rough { &[][..] } else { &rough_only[..] };
+            let not_metal = [
+                ("reflectance", d.reflectance.is_some()),
+                ("diffuse_reflectance", d.diffuse_reflectance.is_some()),
+                ("nonlinear", d.nonlinear.is_some()),
+            ];
+            cx.only(&what, &[dielectric_only.as_slice(), &not_metal, other].concat())?;
+            let metal = metal(cx, d)?;
+            Ok(if rough {
+                Bsdf::RoughConductor(RoughConductor { metal, microfacet: microfacet(cx, d)? })
+            } else {
+                Bsdf::Conductor(Conductor(metal))
+            })
+        }
         other => cx.err(format!(
             "unknown bsdf type `{other}`; use null, diffuse, dielectric, thindielectric, plastic, \
-             roughdielectric or roughplastic"
+             conductor, roughdielectric, roughplastic or roughconductor"
         )),
     }
+}
+
+/// A conductor's metal: Mitsuba's named `material` (default `none`, a perfect mirror), or its
+/// `eta` and `k`; and the factor `specular_reflectance`.
+fn metal(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Metal> {
+    let (eta, k) = match (&d.material, d.eta, d.k) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+            return cx.err("give a conductor either `material` or `eta` and `k`, not both");
+        }
+        (Some(name), None, None) => match Metal::named(name) {
+            Some(v) => v,
+            None => {
+                return cx.err(format!(
+                    "material \"{name}\" is not one of Mitsuba's conductors (none, {}); give `eta` \
+                     and `k` instead",
+                    Metal::names().collect::<Vec<_>>().join(", ")
+                ));
+            }
+        },
+        (None, eta, k) => (
+            cx.colour("eta", eta.unwrap_or(Rgb::Grey(0.0)), None)?,
+            cx.colour("k", k.unwrap_or(Rgb::Grey(1.0)), None)?,
+        ),
+    };
+    let specular = d.specular_reflectance.unwrap_or(Rgb::Grey(1.0));
+    let specular = cx.colour("specular_reflectance", specular, Some(1.0))?;
+    Ok(Metal { eta, k, specular, two_sided: d.two_sided.unwrap_or(false) })
 }
 
 /// The micro-normals of a rough surface: Mitsuba's `distribution` (default Beckmann) and

@@ -181,8 +181,8 @@ pub enum TransformStep {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BsdfDesc {
-    /// "null", "diffuse", "dielectric", "thindielectric", "plastic", "roughdielectric" or
-    /// "roughplastic".
+    /// "null", "diffuse", "dielectric", "thindielectric", "plastic", "conductor", or the rough
+    /// "roughdielectric", "roughplastic" or "roughconductor".
     #[serde(rename = "type")]
     pub kind: String,
     /// Diffuse: reflectance (a colour or a checkerboard table).
@@ -196,13 +196,21 @@ pub struct BsdfDesc {
     pub ext_ior: Option<f32>,
     /// Plastic, roughplastic: the base's albedo (a colour or a checkerboard table).
     pub diffuse_reflectance: Option<TextureDesc>,
-    /// Plastic, roughplastic: a factor on the coating's specular reflection.
+    /// Plastic, conductor and their rough kinds: a factor on the specular reflection.
     pub specular_reflectance: Option<Rgb>,
     /// Plastic, roughplastic: Mitsuba's `nonlinear` (internal reflections tint the base).
     pub nonlinear: Option<bool>,
-    /// Roughdielectric, roughplastic: "beckmann" (the default) or "ggx".
+    /// Conductor, roughconductor: one of Mitsuba's named metals ("Au", "Cu", ...; "none", a
+    /// perfect mirror, by default).
+    pub material: Option<String>,
+    /// Conductor, roughconductor: the real part of the index of refraction (instead of a
+    /// `material`; 0 when only `k` is given).
+    pub eta: Option<Rgb>,
+    /// Conductor, roughconductor: the imaginary part (1 when only `eta` is given).
+    pub k: Option<Rgb>,
+    /// The rough kinds: "beckmann" (the default) or "ggx".
     pub distribution: Option<String>,
-    /// Roughdielectric, roughplastic: the roughness (default 0.1).
+    /// The rough kinds: the roughness (default 0.1).
     pub alpha: Option<f32>,
 }
 

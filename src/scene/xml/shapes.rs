@@ -14,8 +14,9 @@ use std::rc::Rc;
 use toml::Spanned;
 
 const SHAPES: &str = "sphere, cube, rectangle, disk, obj or ply";
-const BSDFS: &str = "null, diffuse, dielectric, thindielectric, plastic, roughdielectric, \
-                     roughplastic, or twosided around diffuse, plastic or roughplastic";
+const BSDFS: &str = "null, diffuse, dielectric, thindielectric, plastic, conductor, \
+                     roughdielectric, roughplastic, roughconductor, or twosided around diffuse, \
+                     plastic, conductor or their rough kinds";
 const EMITTERS: &str = "point, spot, directional, constant, envmap, and area inside a <shape>";
 
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
@@ -127,6 +128,15 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
             (d.int_ior, d.ext_ior) = iors(&p)?;
             roughness(&p, &mut d)?;
         }
+        "conductor" | "roughconductor" => {
+            d.material = p.string("material")?.map(|(s, _)| s.to_string());
+            d.eta = p.color("eta")?;
+            d.k = p.color("k")?;
+            d.specular_reflectance = p.color("specular_reflectance")?;
+            if o.kind == "roughconductor" {
+                roughness(&p, &mut d)?;
+            }
+        }
         "plastic" | "roughplastic" => {
             d.diffuse_reflectance = reflectance(&p, "diffuse_reflectance")?;
             d.specular_reflectance = p.color("specular_reflectance")?;
@@ -142,9 +152,11 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
             let [(_, inner)] = inner.as_slice() else {
                 return Err(p.err("twosided wraps exactly one <bsdf>"));
             };
-            if !["diffuse", "plastic", "roughplastic"].contains(&inner.kind.as_str()) {
+            let sided = ["diffuse", "plastic", "roughplastic", "conductor", "roughconductor"];
+            if !sided.contains(&inner.kind.as_str()) {
                 return Err(p.err(format!(
-                    "zerovar's two-sided surfaces are diffuse, plastic or roughplastic, not `{}`",
+                    "zerovar's two-sided surfaces are diffuse, plastic, conductor or their rough \
+                     kinds, not `{}`",
                     inner.kind
                 )));
             }
