@@ -983,3 +983,44 @@ fn conductors_defaults_materials_and_sides() {
     let metal = Metal { eta: Spectrum::new(0.2, 0.9, 1.1), ..mirror };
     assert_eq!(load("metal-4.xml", given), Bsdf::Conductor(Conductor(metal)));
 }
+
+/// `<spectrum type="d65">` reads as Mitsuba's RGB variants read it, white times its `scale`,
+/// in emitters and reflectances alike; `blackbody`, which they refuse, and other types are
+/// errors that say what to write instead.
+#[test]
+fn typed_spectra_as_mitsubas_rgb_variants() {
+    let emitting = |radiance: &str| {
+        format!(
+            "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\
+             </sensor><shape type=\"sphere\"><emitter type=\"area\">{radiance}</emitter>\
+             <bsdf type=\"diffuse\"><spectrum name=\"reflectance\" type=\"d65\"/></bsdf></shape></scene>"
+        )
+    };
+    let d65 =
+        "<spectrum name=\"radiance\" type=\"d65\"><float name=\"scale\" value=\"2\"/></spectrum>";
+    let a = xml("d65.xml", &emitting(d65), &[]).unwrap();
+    let b = xml("rgb.xml", &emitting("<rgb name=\"radiance\" value=\"2\"/>"), &[]).unwrap();
+    assert_eq!(format!("{:?}", a.lights()), format!("{:?}", b.lights()));
+    let white = zerovar::bsdf::Texture::Constant(zerovar::math::Spectrum::ONE);
+    assert_eq!(
+        a.surfaces()[0].bsdf,
+        zerovar::bsdf::Bsdf::Diffuse { reflectance: white, two_sided: false }
+    );
+    for (radiance, needle) in [
+        (
+            "<spectrum name=\"radiance\" type=\"blackbody\"><float name=\"temperature\" value=\"5000\"/></spectrum>",
+            "a blackbody spectrum exists only in Mitsuba's spectral variants",
+        ),
+        (
+            "<spectrum name=\"radiance\" type=\"regular\"/>",
+            "<spectrum type=\"regular\"> is not supported",
+        ),
+        (
+            "<spectrum name=\"radiance\" type=\"d65\"><float name=\"gain\" value=\"2\"/></spectrum>",
+            "takes only <float name=\"scale\">",
+        ),
+    ] {
+        let e = xml("typed.xml", &emitting(radiance), &[]).unwrap_err().to_string();
+        assert!(e.contains(needle) && e.contains("typed.xml:1:"), "{radiance}: {e}");
+    }
+}
