@@ -286,3 +286,10 @@ fn mitsuba_o_rough_plastic_and_glass_in_fog() {
 fn mitsuba_p_metals_in_fog() {
     validate("p-metal-fog", 16384);
 }
+
+/// Mitsuba's `bitmap` texture (an sRGB PNG), bilinear and repeated, nearest and clamped, on
+/// OBJ quads with texture coordinates asymmetric in v.
+#[test]
+fn mitsuba_q_bitmap_textures() {
+    validate("q-bitmap", 4096);
+}

@@ -905,7 +905,7 @@ fn rough_bsdfs_defaults_parameters_and_errors() {
     let beckmann = Microfacet { kind: MicrofacetKind::Beckmann, alpha: 0.1 };
     let s = xml("rough.xml", &sphere_with("<bsdf type=\"roughplastic\"/>"), &[]).unwrap();
     let grey = Texture::Constant(Spectrum::splat(0.5));
-    let default = RoughPlastic::new(grey, Spectrum::ONE, 1.49 / 1.000_277, false, beckmann);
+    let default = RoughPlastic::new(grey.clone(), Spectrum::ONE, 1.49 / 1.000_277, false, beckmann);
     assert_eq!(s.surfaces()[0].bsdf, Bsdf::RoughPlastic(default));
     let s = xml("rough-2.xml", &sphere_with("<bsdf type=\"roughdielectric\"/>"), &[]).unwrap();
     let glass = RoughDielectric { microfacet: beckmann, eta: 1.5046 / 1.000_277 };
@@ -959,8 +959,9 @@ fn rough_bsdfs_defaults_parameters_and_errors() {
 fn conductors_defaults_materials_and_sides() {
     use zerovar::bsdf::{Bsdf, Conductor, Metal, Microfacet, MicrofacetKind, RoughConductor};
     use zerovar::math::Spectrum;
-    let load =
-        |name: &str, bsdf: &str| xml(name, &sphere_with(bsdf), &[]).unwrap().surfaces()[0].bsdf;
+    let load = |name: &str, bsdf: &str| {
+        xml(name, &sphere_with(bsdf), &[]).unwrap().surfaces()[0].bsdf.clone()
+    };
     let mirror =
         Metal { eta: Spectrum::ZERO, k: Spectrum::ONE, specular: Spectrum::ONE, two_sided: false };
     let beckmann = Microfacet { kind: MicrofacetKind::Beckmann, alpha: 0.1 };
@@ -1022,5 +1023,51 @@ fn typed_spectra_as_mitsubas_rgb_variants() {
     ] {
         let e = xml("typed.xml", &emitting(radiance), &[]).unwrap_err().to_string();
         assert!(e.contains(needle) && e.contains("typed.xml:1:"), "{radiance}: {e}");
+    }
+}
+
+/// Mitsuba's `bitmap` texture: a PNG read as sRGB, looked up with the image's top at v = 0
+/// (its agreement with Mitsuba is tests/mitsuba.rs's `q-bitmap`); formats, filters, wrap modes
+/// and values zerovar does not take are errors that say what to do.
+#[test]
+fn bitmap_textures_and_their_errors() {
+    use zerovar::bsdf::{Bsdf, Texture};
+    let png = std::fs::read(repo("tests/data/mitsuba/tex-5x3.png")).unwrap();
+    write("tex.png", &png);
+    write("tex.jpg", &png);
+    let bright = temp_dir().join("bright.exr");
+    let meta =
+        zerovar::output::ImageMetadata { spp: 1, seconds: 0.0, seed: 0, scene: String::new() };
+    zerovar::output::write_exr(&bright, 1, 1, &[[1.5, 0.5, 0.5]], &meta).unwrap();
+    let textured = |texture: &str| {
+        sphere_with(&format!(
+            "<bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\">{texture}\
+             </texture></bsdf>"
+        ))
+    };
+    let s = xml("bitmap.xml", &textured("<string name=\"filename\" value=\"tex.png\"/>"), &[]);
+    let s = s.unwrap();
+    let Bsdf::Diffuse { reflectance: t @ Texture::Bitmap(_), .. } = &s.surfaces()[0].bsdf else {
+        panic!("{:?}", s.surfaces()[0].bsdf)
+    };
+    // The top-left texel (pure red in the file) at its centre; bottom-right pure blue.
+    assert_eq!(t.eval(Vec2::new(0.1, 1.0 / 6.0)).to_array(), [1.0, 0.0, 0.0]);
+    assert_eq!(t.eval(Vec2::new(0.9, 5.0 / 6.0)).to_array(), [0.0, 0.0, 1.0]);
+    for (texture, needle) in [
+        ("<string name=\"filename\" value=\"tex.jpg\"/>", "zerovar reads PNG and OpenEXR textures"),
+        ("<string name=\"filename\" value=\"missing.png\"/>", "missing.png not found"),
+        ("<string name=\"filename\" value=\"bright.exr\"/>", "texel values reach 1.5"),
+        (
+            "<string name=\"filename\" value=\"tex.png\"/><string name=\"filter_type\" value=\"cubic\"/>",
+            "filter_type `cubic`: use bilinear or nearest",
+        ),
+        (
+            "<string name=\"filename\" value=\"tex.png\"/><string name=\"wrap_mode\" value=\"zero\"/>",
+            "wrap_mode `zero`: use repeat, mirror or clamp",
+        ),
+        ("<float name=\"gamma\" value=\"2\"/>", "give the image as <string name=\"filename\""),
+    ] {
+        let e = xml("bitmap-bad.xml", &textured(texture), &[]).unwrap_err().to_string();
+        assert!(e.contains(needle), "{texture}: {e}");
     }
 }

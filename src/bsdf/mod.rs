@@ -10,6 +10,7 @@
 //! Like Mitsuba 3, the diffuse BSDF is one-sided (black seen from the back) unless
 //! `two_sided`, and the dielectric scales transported radiance by 1/eta^2 when refracting.
 
+mod bitmap;
 mod conductor;
 mod conductors;
 mod microfacet;
@@ -17,6 +18,7 @@ mod rough;
 #[cfg(test)]
 mod testing;
 
+pub use bitmap::{Bitmap, Wrap, srgb_to_linear};
 pub use conductor::{Conductor, Metal, RoughConductor};
 pub use microfacet::{MIN_ALPHA, Microfacet, MicrofacetKind};
 pub use rough::{RoughDielectric, RoughPlastic};
@@ -24,9 +26,10 @@ pub use rough::{RoughDielectric, RoughPlastic};
 use crate::math::{Spectrum, cosine_hemisphere};
 use glam::{Vec2, Vec3A};
 use std::f32::consts::FRAC_1_PI;
+use std::sync::Arc;
 
 /// A reflectance that may vary over the surface.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Texture {
     /// The same value everywhere.
     Constant(Spectrum),
@@ -39,6 +42,8 @@ pub enum Texture {
         /// Checks per unit of uv (Mitsuba's `to_uv` scale).
         scale: Vec2,
     },
+    /// Mitsuba's bitmap: an image.
+    Bitmap(Arc<Bitmap>),
 }
 
 impl Texture {
@@ -47,6 +52,7 @@ impl Texture {
         match *self {
             Texture::Constant(c) => c,
             Texture::Checkerboard { color0, color1, .. } => 0.5 * (color0 + color1),
+            Texture::Bitmap(ref b) => b.mean(),
         }
     }
 
@@ -59,6 +65,7 @@ impl Texture {
                 let p = (uv * scale).fract_gl();
                 if (p.x > 0.5) == (p.y > 0.5) { color0 } else { color1 }
             }
+            Texture::Bitmap(ref b) => b.eval(uv),
         }
     }
 }
@@ -67,7 +74,7 @@ impl Texture {
 // Rough plastic carries its coating's table inline: a scene has few surfaces, and the walk
 // borrows them rather than copying.
 #[allow(clippy::large_enum_variant)]
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub enum Bsdf {
     /// No surface at all: a boundary between media that light passes straight through.
     Null,
@@ -102,7 +109,7 @@ pub enum Bsdf {
 }
 
 /// The parameters of [`Bsdf::Plastic`], with what it precomputes from them.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct Plastic {
     /// The base's albedo.
     pub diffuse: Texture,
@@ -235,7 +242,7 @@ impl Bsdf {
     #[inline]
     pub fn eval(&self, wo: Vec3A, wi: Vec3A, uv: Vec2) -> Spectrum {
         match *self {
-            Bsdf::Diffuse { reflectance, two_sided } => {
+            Bsdf::Diffuse { ref reflectance, two_sided } => {
                 let (wo_z, wi_z) =
                     if two_sided && wo.z < 0.0 { (-wo.z, -wi.z) } else { (wo.z, wi.z) };
                 if wo_z <= 0.0 || wi_z <= 0.0 {
@@ -243,7 +250,7 @@ impl Bsdf {
                 }
                 reflectance.eval(uv) * (FRAC_1_PI * wi_z)
             }
-            Bsdf::Plastic(p) => {
+            Bsdf::Plastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
                 if wo.z <= 0.0 || wi.z <= 0.0 {
                     return Spectrum::ZERO;
@@ -270,7 +277,7 @@ impl Bsdf {
                     if two_sided && wo.z < 0.0 { (-wo.z, -wi.z) } else { (wo.z, wi.z) };
                 if wo_z <= 0.0 || wi_z <= 0.0 { 0.0 } else { FRAC_1_PI * wi_z }
             }
-            Bsdf::Plastic(p) => {
+            Bsdf::Plastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
                 if wo.z <= 0.0 || wi.z <= 0.0 {
                     return 0.0;
@@ -293,7 +300,7 @@ impl Bsdf {
             Bsdf::Null => {
                 Some(BsdfSample { wi: -wo, weight: Spectrum::ONE, pdf: 1.0, delta: true, eta: 1.0 })
             }
-            Bsdf::Diffuse { reflectance, two_sided } => {
+            Bsdf::Diffuse { ref reflectance, two_sided } => {
                 let side = if two_sided && wo.z < 0.0 { -1.0 } else { 1.0 };
                 if wo.z * side <= 0.0 {
                     return None;
@@ -311,9 +318,9 @@ impl Bsdf {
             }
             Bsdf::Dielectric { eta } => sample_dielectric(eta, wo, u1),
             Bsdf::ThinDielectric { eta } => Some(sample_thin_dielectric(eta, wo, u1)),
-            Bsdf::Plastic(p) => {
+            Bsdf::Plastic(ref p) => {
                 let (wo, _, flipped) = p.front(wo, wo);
-                let bs = sample_plastic(&p, wo, uv, u1, u2)?;
+                let bs = sample_plastic(p, wo, uv, u1, u2)?;
                 Some(BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs })
             }
             Bsdf::RoughDielectric(r) => r.sample(wo, u1, u2),
@@ -507,7 +514,7 @@ mod tests {
             1.49 / 1.000_277,
             false,
         );
-        let b = Bsdf::Plastic(p);
+        let b = Bsdf::Plastic(p.clone());
         assert!(b.has_smooth_component());
         let grid = zerovar_testkit::SphereGrid::uniform(glam::DVec3::Z);
         for wo in [Vec3A::new(0.3, 0.1, 0.9).normalize(), Vec3A::new(0.95, 0.0, 0.1).normalize()] {

@@ -111,7 +111,7 @@ const TABLE: usize = 64;
 const QUADRATURE: usize = 48;
 
 /// Mitsuba's `roughplastic`, with what it precomputes.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RoughPlastic {
     /// The base's albedo.
     pub diffuse: Texture,
@@ -376,7 +376,7 @@ mod mitsuba {
         let b = |kind, alpha, nonlinear| {
             let mf = Microfacet { kind, alpha };
             Bsdf::RoughPlastic(RoughPlastic::new(
-                diffuse,
+                diffuse.clone(),
                 Spectrum::ONE,
                 1.49 / 1.000_277,
                 nonlinear,

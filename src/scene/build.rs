@@ -5,8 +5,8 @@ use super::desc::*;
 use super::{RenderSettings, Scene, SceneError, Sources, Surface};
 use crate::accel::Bvh;
 use crate::bsdf::{
-    Bsdf, Conductor, MIN_ALPHA, Metal, Microfacet, MicrofacetKind, Plastic, RoughConductor,
-    RoughDielectric, RoughPlastic, Texture,
+    Bitmap, Bsdf, Conductor, MIN_ALPHA, Metal, Microfacet, MicrofacetKind, Plastic, RoughConductor,
+    RoughDielectric, RoughPlastic, Texture, Wrap, srgb_to_linear,
 };
 use crate::camera::Camera;
 use crate::lights::{EnvMap, Light};
@@ -21,6 +21,7 @@ use crate::transform::Transform;
 use glam::{Vec2, Vec3, Vec3A};
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 
 /// Most pixels a camera may have: a film holds 72 bytes per pixel, and a render keeps several
 /// (training passes, the render phase), so 2^25 pixels stay within a few gigabytes.
@@ -513,6 +514,63 @@ fn relative_ior(cx: &Ctx<'_>, d: &BsdfDesc, int: f32) -> Result<f32> {
     Ok(int / ext)
 }
 
+/// Mitsuba's bitmap texture from its image file: PNG (8 or 16 bits, sRGB-decoded unless
+/// `raw`) or OpenEXR (linear), of reflectances in [0, 1].
+fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc) -> Result<Texture> {
+    let file = cx.file(&d.filename);
+    crate::files::check(&file).or_else(|e| cx.err(format!("{}: {e}", file.display())))?;
+    let is = |ext: &str| file.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext));
+    let (width, height, texels) = if is("exr") {
+        crate::output::read_exr(&file).or_else(|e| cx.err(e.to_string()))?
+    } else if is("png") {
+        let cannot = |e: image::ImageError| format!("{}: cannot read PNG: {e}", file.display());
+        let (w, h) = image::image_dimensions(&file).or_else(|e| cx.err(cannot(e)))?;
+        let pixels = u64::from(w) * u64::from(h);
+        if pixels > crate::output::MAX_EXR_PIXELS as u64 {
+            return cx.err(format!(
+                "{}: {w} x {h} texels, more than the {} zerovar reads",
+                file.display(),
+                crate::output::MAX_EXR_PIXELS
+            ));
+        }
+        let image = image::open(&file).or_else(|e| cx.err(cannot(e)))?.into_rgb32f();
+        let decode = |v: f32| if d.raw.unwrap_or(false) { v } else { srgb_to_linear(v) };
+        let texels = image.pixels().map(|p| p.0.map(decode)).collect();
+        (w as usize, h as usize, texels)
+    } else {
+        return cx.err(format!(
+            "{}: zerovar reads PNG and OpenEXR textures; convert the image to one of them",
+            file.display()
+        ));
+    };
+    let bilinear = match d.filter_type.as_deref() {
+        None | Some("bilinear") => true,
+        Some("nearest") => false,
+        Some(other) => return cx.err(format!("filter_type `{other}`: use bilinear or nearest")),
+    };
+    let wrap = match d.wrap_mode.as_deref() {
+        None | Some("repeat") => Wrap::Repeat,
+        Some("mirror") => Wrap::Mirror,
+        Some("clamp") => Wrap::Clamp,
+        Some(other) => return cx.err(format!("wrap_mode `{other}`: use repeat, mirror or clamp")),
+    };
+    let scale = d.scale.unwrap_or([1.0, 1.0]);
+    cx.finite("bitmap scale", &scale)?;
+    let Some(b) = Bitmap::new(width, height, texels, bilinear, wrap, Vec2::from_array(scale))
+    else {
+        return cx.err(format!("{}: the image is empty", file.display()));
+    };
+    let max = b.max();
+    if max.is_nan() || max > 1.0 || b.mean().min_element() < 0.0 || !b.mean().is_finite() {
+        return cx.err(format!(
+            "{}: texel values reach {max}; a reflectance lies in [0, 1] (scale the image, or \
+             save it as PNG)",
+            file.display()
+        ));
+    }
+    Ok(Texture::Bitmap(Arc::new(b)))
+}
+
 /// A reflectance texture `name` (0.5 grey when absent, as in Mitsuba).
 fn texture(cx: &Ctx<'_>, name: &str, d: Option<&TextureDesc>) -> Result<Texture> {
     Ok(match d {
@@ -520,7 +578,7 @@ fn texture(cx: &Ctx<'_>, name: &str, d: Option<&TextureDesc>) -> Result<Texture>
         Some(TextureDesc::Constant(c)) => Texture::Constant(cx.colour(name, *c, Some(1.0))?),
         Some(TextureDesc::Checkerboard(c)) => {
             if c.kind != "checkerboard" {
-                return cx.err(format!("unknown texture `{}`; use checkerboard", c.kind));
+                return cx.err(format!("unknown texture `{}`; use checkerboard or bitmap", c.kind));
             }
             let scale = c.scale.unwrap_or([1.0, 1.0]);
             cx.finite("checkerboard scale", &scale)?;
@@ -529,6 +587,12 @@ fn texture(cx: &Ctx<'_>, name: &str, d: Option<&TextureDesc>) -> Result<Texture>
                 color1: cx.colour("color1", c.color1.unwrap_or(Rgb::Grey(0.2)), Some(1.0))?,
                 scale: Vec2::from_array(scale),
             }
+        }
+        Some(TextureDesc::Bitmap(b)) => {
+            if b.kind != "bitmap" {
+                return cx.err(format!("unknown texture `{}`; use checkerboard or bitmap", b.kind));
+            }
+            bitmap(cx, b)?
         }
     })
 }

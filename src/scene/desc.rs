@@ -222,6 +222,27 @@ pub enum TextureDesc {
     Constant(Rgb),
     /// A checkerboard.
     Checkerboard(CheckerboardDesc),
+    /// An image.
+    Bitmap(BitmapDesc),
+}
+
+/// Mitsuba's bitmap texture: `{ type = "bitmap", filename = "wood.png" }`.
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BitmapDesc {
+    /// Must be "bitmap".
+    #[serde(rename = "type")]
+    pub kind: String,
+    /// A PNG (sRGB-encoded unless `raw`) or OpenEXR (linear) image, relative to the scene.
+    pub filename: String,
+    /// "bilinear" (the default) or "nearest".
+    pub filter_type: Option<String>,
+    /// "repeat" (the default), "mirror" or "clamp".
+    pub wrap_mode: Option<String>,
+    /// Take a PNG's values as linear (default false: decode sRGB).
+    pub raw: Option<bool>,
+    /// Image tiles per unit of uv, [u, v] (default 1).
+    pub scale: Option<[f32; 2]>,
 }
 
 /// Mitsuba's checkerboard texture.

@@ -54,10 +54,10 @@ pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
             }
             // Definitions for `<ref>`: checked here, used where referenced.
             "bsdf" => {
-                super::shapes::bsdf(o)?;
+                super::shapes::bsdf(conv, o)?;
             }
             "texture" => {
-                super::shapes::texture(o)?;
+                super::shapes::texture(conv, o)?;
             }
             "medium" => {
                 conv.medium(o)?;

@@ -7,7 +7,7 @@ use super::props::{COLOR, Props, color};
 use super::tree::{Object, Value};
 use super::{Conv, Result, compose, spanned};
 use crate::scene::desc::{
-    BsdfDesc, CheckerboardDesc, EmitterDesc, LightDesc, Rgb, ShapeDesc, TextureDesc,
+    BitmapDesc, BsdfDesc, CheckerboardDesc, EmitterDesc, LightDesc, Rgb, ShapeDesc, TextureDesc,
 };
 use glam::{Vec3, Vec3A};
 use std::rc::Rc;
@@ -47,7 +47,7 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
     }
     let transform = p.transform("to_world")?.unwrap_or(&[]).to_vec();
     let flip_normals = p.boolean("flip_normals")?.unwrap_or(false);
-    let bsdf = p.object("bsdf")?.map(bsdf).transpose()?;
+    let bsdf = p.object("bsdf")?.map(|b| bsdf(conv, b)).transpose()?;
     let (mut interior, mut exterior) = (None, None);
     for (prop, m) in p.objects("medium") {
         let slot = match prop.name.as_str() {
@@ -91,7 +91,7 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
     let textured = bsdf.as_ref().is_some_and(|b| {
         [&b.reflectance, &b.diffuse_reflectance]
             .iter()
-            .any(|t| matches!(t, Some(TextureDesc::Checkerboard(_))))
+            .any(|t| matches!(t, Some(TextureDesc::Checkerboard(_) | TextureDesc::Bitmap(_))))
     });
     if o.kind == "ply" && textured {
         return Err(p.err(
@@ -117,12 +117,12 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
     Ok(spanned(&o.pos, desc))
 }
 
-pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
+pub(super) fn bsdf(conv: &Conv, o: &Rc<Object>) -> Result<BsdfDesc> {
     let p = Props::new(o);
     let mut d = BsdfDesc { kind: o.kind.clone(), ..Default::default() };
     match o.kind.as_str() {
         "null" => {}
-        "diffuse" => d.reflectance = reflectance(&p, "reflectance")?,
+        "diffuse" => d.reflectance = reflectance(conv, &p, "reflectance")?,
         "dielectric" | "thindielectric" => (d.int_ior, d.ext_ior) = iors(&p)?,
         "roughdielectric" => {
             (d.int_ior, d.ext_ior) = iors(&p)?;
@@ -138,7 +138,7 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
             }
         }
         "plastic" | "roughplastic" => {
-            d.diffuse_reflectance = reflectance(&p, "diffuse_reflectance")?;
+            d.diffuse_reflectance = reflectance(conv, &p, "diffuse_reflectance")?;
             d.specular_reflectance = p.color("specular_reflectance")?;
             (d.int_ior, d.ext_ior) = iors(&p)?;
             d.nonlinear = p.boolean("nonlinear")?;
@@ -160,7 +160,7 @@ pub(super) fn bsdf(o: &Rc<Object>) -> Result<BsdfDesc> {
                     inner.kind
                 )));
             }
-            return Ok(BsdfDesc { two_sided: Some(true), ..bsdf(inner)? });
+            return Ok(BsdfDesc { two_sided: Some(true), ..bsdf(conv, inner)? });
         }
         other => return Err(p.err(format!("unknown or unsupported bsdf `{other}`; use {BSDFS}"))),
     }
@@ -183,10 +183,10 @@ fn roughness(p: &Props<'_>, d: &mut BsdfDesc) -> Result<()> {
 }
 
 /// A reflectance `name`: a colour or a nested `<texture>`.
-fn reflectance(p: &Props<'_>, name: &'static str) -> Result<Option<TextureDesc>> {
+fn reflectance(conv: &Conv, p: &Props<'_>, name: &'static str) -> Result<Option<TextureDesc>> {
     let Some(prop) = p.raw(name) else { return Ok(None) };
     Ok(Some(match &prop.value {
-        Value::Object(t) if t.tag == "texture" => texture(t)?,
+        Value::Object(t) if t.tag == "texture" => texture(conv, t)?,
         _ => TextureDesc::Constant(
             color(prop, &p.obj.tag)
                 .ok_or_else(|| p.wrong(prop, &format!("{COLOR} or a <texture>")))?,
@@ -221,16 +221,14 @@ fn iors(p: &Props<'_>) -> Result<(Option<f32>, Option<f32>)> {
 }
 
 /// A `<texture>`: the checkerboard, scaled by a `to_uv` transform.
-pub(super) fn texture(o: &Rc<Object>) -> Result<TextureDesc> {
+pub(super) fn texture(conv: &Conv, o: &Rc<Object>) -> Result<TextureDesc> {
     let p = Props::new(o);
-    if o.kind != "checkerboard" {
+    if o.kind != "checkerboard" && o.kind != "bitmap" {
         return Err(p.err(format!(
-            "the `{}` texture is not supported; zerovar has `checkerboard`",
+            "the `{}` texture is not supported; zerovar has `checkerboard` and `bitmap`",
             o.kind
         )));
     }
-    let color0 = p.color("color0")?;
-    let color1 = p.color("color1")?;
     let scale = match p.transform("to_uv")? {
         None => None,
         Some(steps) => {
@@ -238,20 +236,35 @@ pub(super) fn texture(o: &Rc<Object>) -> Result<TextureDesc> {
             let (m, offset) = (t.m.matrix3, t.m.translation);
             if m.x_axis.y != 0.0 || m.y_axis.x != 0.0 || offset.x != 0.0 || offset.y != 0.0 {
                 return Err(p.err(
-                    "to_uv may only scale u and v (zerovar's checkerboard has a scale, no \
-                     rotation or offset)",
+                    "to_uv may only scale u and v (zerovar's textures have a scale, no rotation \
+                     or offset)",
                 ));
             }
             Some([m.x_axis.x, m.y_axis.y])
         }
     };
+    let desc = if o.kind == "bitmap" {
+        let Some((name, prop)) = p.string("filename")? else {
+            return Err(p.err("give the image as <string name=\"filename\" value=\"...\"/>"));
+        };
+        TextureDesc::Bitmap(BitmapDesc {
+            kind: "bitmap".into(),
+            filename: conv.file(name, prop)?,
+            filter_type: p.string("filter_type")?.map(|(s, _)| s.to_string()),
+            wrap_mode: p.string("wrap_mode")?.map(|(s, _)| s.to_string()),
+            raw: p.boolean("raw")?,
+            scale,
+        })
+    } else {
+        TextureDesc::Checkerboard(CheckerboardDesc {
+            kind: "checkerboard".into(),
+            color0: p.color("color0")?,
+            color1: p.color("color1")?,
+            scale,
+        })
+    };
     p.finish()?;
-    Ok(TextureDesc::Checkerboard(CheckerboardDesc {
-        kind: "checkerboard".into(),
-        color0,
-        color1,
-        scale,
-    }))
+    Ok(desc)
 }
 
 /// An emitter outside shapes.
