@@ -293,3 +293,10 @@ fn mitsuba_p_metals_in_fog() {
 fn mitsuba_q_bitmap_textures() {
     validate("q-bitmap", 4096);
 }
+
+/// Mitsuba's `serialized` meshes: two meshes of one file (single and double precision, with
+/// and without normals and texture coordinates), a medium's boundary and a textured quad.
+#[test]
+fn mitsuba_r_serialized_meshes() {
+    validate("r-serialized", 4096);
+}

@@ -331,7 +331,7 @@ fn bad_input_names_the_place_and_the_fix() {
             "type=\"sphere\"",
             "type=\"teapot\"",
             "plugin.xml:5:5",
-            &["unknown shape `teapot`", "sphere, cube, rectangle, disk, obj or ply"],
+            &["unknown shape `teapot`", "sphere, cube, rectangle, disk, obj, ply or serialized"],
         ),
         (
             "type",
@@ -423,7 +423,7 @@ fn bad_input_names_the_place_and_the_fix() {
             "type=\"sphere\"",
             "type=\"serialized\"",
             "serialized.xml:5:5",
-            &["serialized meshes are not supported", "type=\"ply\""],
+            &["give the mesh as <string name=\"filename\""],
         ),
         ("ply", "type=\"sphere\"", "type=\"ply\"", "ply.xml:5:5", &["give the mesh as <string"]),
         (

@@ -295,6 +295,7 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
         ("filename", d.filename.is_some()),
         ("face_normals", d.face_normals.is_some()),
         ("flip_tex_coords", d.flip_tex_coords.is_some()),
+        ("shape_index", d.shape_index.is_some()),
     ];
     match d.kind.as_str() {
         "sphere" => {
@@ -327,23 +328,33 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
                 _ => Geometry::Disk(Disk::new(to_world)),
             })
         }
-        "obj" | "ply" => {
-            let only_obj = [("flip_tex_coords", d.kind == "ply" && d.flip_tex_coords.is_some())];
-            cx.only(&format!("{} meshes", d.kind), &[not_sphere.as_slice(), &only_obj].concat())?;
+        "obj" | "ply" | "serialized" => {
+            let only_obj = [("flip_tex_coords", d.kind != "obj" && d.flip_tex_coords.is_some())];
+            let only_serialized = [("shape_index", d.kind != "serialized" && d.shape_index.is_some())];
+            cx.only(
+                &format!("{} meshes", d.kind),
+                &[not_sphere.as_slice(), &only_obj, &only_serialized].concat(),
+            )?;
             let file = cx.file(&cx.required("filename", &d.filename)?);
             if !file.is_file() {
                 return cx.err(format!("{}: no such file", file.display()));
             }
             let face_normals = d.face_normals.unwrap_or(false);
-            let mesh = if d.kind == "obj" {
-                Mesh::from_obj(&file, &to_world, face_normals, d.flip_tex_coords.unwrap_or(true))
-            } else {
-                Mesh::from_ply(&file, &to_world, face_normals)
+            let mesh = match d.kind.as_str() {
+                "obj" => {
+                    let flip = d.flip_tex_coords.unwrap_or(true);
+                    Mesh::from_obj(&file, &to_world, face_normals, flip)
+                }
+                "ply" => Mesh::from_ply(&file, &to_world, face_normals),
+                _ => {
+                    let index = d.shape_index.unwrap_or(0);
+                    Mesh::from_serialized(&file, index, &to_world, face_normals)
+                }
             };
             mesh.map(Geometry::Mesh).or_else(|e| cx.err(format!("{}: {e}", file.display())))
         }
         other => cx.err(format!(
-            "unknown shape type `{other}`; use sphere, cube, rectangle, disk, obj or ply"
+            "unknown shape type `{other}`; use sphere, cube, rectangle, disk, obj, ply or serialized"
         )),
     }
 }

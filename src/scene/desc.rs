@@ -272,19 +272,21 @@ pub struct EmitterDesc {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShapeDesc {
-    /// "sphere", "cube", "rectangle", "disk", "obj" or "ply".
+    /// "sphere", "cube", "rectangle", "disk", "obj", "ply" or "serialized".
     #[serde(rename = "type")]
     pub kind: String,
     /// Sphere: centre (default origin).
     pub center: Option<Vec3>,
     /// Sphere: radius (default 1).
     pub radius: Option<f32>,
-    /// Obj, ply: the file, relative to the scene file.
+    /// Obj, ply, serialized: the file, relative to the scene file.
     pub filename: Option<String>,
-    /// Obj, ply: ignore the file's vertex normals.
+    /// Obj, ply, serialized: ignore the file's vertex normals.
     pub face_normals: Option<bool>,
     /// Obj: turn texture coordinates `(u, v)` into `(u, 1 - v)` (default true, as in Mitsuba).
     pub flip_tex_coords: Option<bool>,
+    /// Serialized: which mesh of the file (default 0).
+    pub shape_index: Option<u32>,
     /// Transform steps applied in order.
     #[serde(default)]
     pub transform: Vec<TransformStep>,

@@ -17,6 +17,9 @@ pub enum MeshError {
     /// The PLY reader failed.
     #[error(transparent)]
     Ply(#[from] super::ply::PlyError),
+    /// The serialized-mesh reader failed.
+    #[error(transparent)]
+    Serialized(#[from] super::serialized::SerializedError),
     /// The file could not be read at all.
     #[error("cannot read the file: {0}")]
     Io(#[from] std::io::Error),
@@ -148,6 +151,19 @@ impl Mesh {
         face_normals: bool,
     ) -> Result<Self, MeshError> {
         Self::from_ply_bytes(&crate::files::read(path)?, to_world, face_normals)
+    }
+
+    /// Reads mesh `index` of a Mitsuba `.serialized` file. Vertex normals are used unless
+    /// `face_normals`, as for OBJ; texture coordinates as written.
+    pub fn from_serialized(
+        path: &Path,
+        index: u32,
+        to_world: &Transform,
+        face_normals: bool,
+    ) -> Result<Self, MeshError> {
+        let mesh = super::serialized::read(&crate::files::read(path)?, index)?;
+        let normals = mesh.normals.filter(|_| !face_normals);
+        Self::new(mesh.positions, normals, mesh.uvs, mesh.triangles, to_world)
     }
 
     /// `from_ply` on the file's bytes.

@@ -11,6 +11,7 @@ mod disk;
 mod mesh;
 mod parallelogram;
 mod ply;
+mod serialized;
 mod sphere;
 
 pub use cuboid::Cuboid;

@@ -13,7 +13,7 @@ use glam::{Vec3, Vec3A};
 use std::rc::Rc;
 use toml::Spanned;
 
-const SHAPES: &str = "sphere, cube, rectangle, disk, obj or ply";
+const SHAPES: &str = "sphere, cube, rectangle, disk, obj, ply or serialized";
 const BSDFS: &str = "null, diffuse, dielectric, thindielectric, plastic, conductor, \
                      roughdielectric, roughplastic, roughconductor, or twosided around diffuse, \
                      plastic, conductor or their rough kinds";
@@ -22,19 +22,13 @@ const EMITTERS: &str = "point, spot, directional, constant, envmap, and area ins
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
     let p = Props::new(o);
     match o.kind.as_str() {
-        "sphere" | "cube" | "rectangle" | "disk" | "obj" | "ply" => {}
-        "serialized" => {
-            return Err(p.err(
-                "serialized meshes are not supported; convert the mesh to PLY or OBJ and use \
-                 <shape type=\"ply\"> or <shape type=\"obj\">",
-            ));
-        }
+        "sphere" | "cube" | "rectangle" | "disk" | "obj" | "ply" | "serialized" => {}
         other => return Err(p.err(format!("unknown shape `{other}`; use {SHAPES}"))),
     }
     let (center, radius) =
         if o.kind == "sphere" { (p.vector("center")?, p.float("radius")?) } else { (None, None) };
-    let (mut filename, mut face_normals, mut flip_uv) = (None, None, true);
-    if o.kind == "obj" || o.kind == "ply" {
+    let (mut filename, mut face_normals, mut flip_uv, mut shape_index) = (None, None, true, None);
+    if ["obj", "ply", "serialized"].contains(&o.kind.as_str()) {
         let Some((name, prop)) = p.string("filename")? else {
             return Err(p.err("give the mesh as <string name=\"filename\" value=\"...\"/>"));
         };
@@ -43,6 +37,15 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         // Only Mitsuba's OBJ reader flips v (PLY has no such option).
         if o.kind == "obj" {
             flip_uv = p.boolean("flip_tex_coords")?.unwrap_or(true);
+        }
+        if o.kind == "serialized" {
+            shape_index =
+                match p.integer("shape_index")? {
+                    None => None,
+                    Some(i) => Some(u32::try_from(i).map_err(|_| {
+                        p.err(format!("shape_index {i} must be a mesh number from 0"))
+                    })?),
+                };
         }
     }
     let transform = p.transform("to_world")?.unwrap_or(&[]).to_vec();
@@ -106,6 +109,7 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         filename,
         face_normals,
         flip_tex_coords: (o.kind == "obj").then_some(flip_uv),
+        shape_index,
         transform,
         flip_normals,
         bsdf,
