@@ -161,7 +161,17 @@ impl Mesh {
         to_world: &Transform,
         face_normals: bool,
     ) -> Result<Self, MeshError> {
-        let mesh = super::serialized::read(&crate::files::read(path)?, index)?;
+        Self::from_serialized_bytes(&crate::files::read(path)?, index, to_world, face_normals)
+    }
+
+    /// `from_serialized` on the file's bytes.
+    pub fn from_serialized_bytes(
+        data: &[u8],
+        index: u32,
+        to_world: &Transform,
+        face_normals: bool,
+    ) -> Result<Self, MeshError> {
+        let mesh = super::serialized::read(data, index)?;
         let normals = mesh.normals.filter(|_| !face_normals);
         Self::new(mesh.positions, normals, mesh.uvs, mesh.triangles, to_world)
     }
