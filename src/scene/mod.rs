@@ -357,7 +357,7 @@ impl Scene {
             hits.sort_unstable_by(|a, b| a.hit.t.total_cmp(&b.hit.t));
             crossings.extend(hits.iter().map(|h| {
                 let shape = h.prim.shape as usize;
-                let (_, mut ng, _, _) = self.shapes[shape].surface(h.prim.index, ray, h.hit);
+                let mut ng = self.shapes[shape].normal(h.prim.index, ray, h.hit);
                 let s = &self.surfaces[shape];
                 if s.flip {
                     ng = -ng;

@@ -104,6 +104,11 @@ impl Cuboid {
         Some(PrimHit { t, b: Vec2::new(face as f32, 0.0) })
     }
 
+    /// The normal of the face hit.
+    pub(super) fn normal(&self, hit: PrimHit) -> Vec3A {
+        self.normals[hit.b.x as usize]
+    }
+
     pub(super) fn surface(&self, ray: &Ray, hit: PrimHit) -> (Vec3A, Vec3A, Vec3A, Vec2) {
         let face = hit.b.x as usize;
         let (axis, sign) = (face / 2, if face % 2 == 1 { 1.0 } else { -1.0 });

@@ -271,6 +271,12 @@ impl Mesh {
         (t > 0.0 && t < t_max).then_some(PrimHit { t, b: Vec2::new(b1, b2) })
     }
 
+    /// Triangle `i`'s geometric normal, as `surface` computes it.
+    pub(super) fn normal(&self, i: u32) -> Vec3A {
+        let [_, e1, e2] = self.edges[i as usize];
+        e1.cross(e2).normalize()
+    }
+
     pub(super) fn surface(&self, i: u32, _ray: &Ray, hit: PrimHit) -> (Vec3A, Vec3A, Vec3A, Vec2) {
         let [a, b, c] = self.indices[i as usize];
         let (p0, p1, p2) = self.vertices(i);

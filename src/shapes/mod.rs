@@ -130,6 +130,17 @@ impl Geometry {
         }
     }
 
+    /// The geometric normal at a hit, as [`Self::surface`] gives it, without the rest: what a
+    /// shadow ray crossing a boundary needs.
+    pub fn normal(&self, i: u32, ray: &Ray, hit: PrimHit) -> Vec3A {
+        match self {
+            Geometry::Cuboid(c) => c.normal(hit),
+            Geometry::Parallelogram(r) => r.normal,
+            Geometry::Mesh(m) => m.normal(i),
+            _ => self.surface(i, ray, hit).1,
+        }
+    }
+
     /// Surface area.
     pub fn area(&self) -> f32 {
         match self {

@@ -22,7 +22,7 @@ pub struct Parallelogram {
     edge_v: Vec3A,
     /// Unit normal `edge_u x edge_v` (the image of +z, or its opposite under a mirroring
     /// transform, as the mesh's winding gave).
-    normal: Vec3A,
+    pub(super) normal: Vec3A,
     area: f32,
 }
 
