@@ -9,6 +9,7 @@
 //! both point away from the surface: `wo` towards where the path came from, `wi` where it goes.
 //! Like Mitsuba 3, the diffuse BSDF is one-sided (black seen from the back) unless
 //! `two_sided`, and the dielectric scales transported radiance by 1/eta^2 when refracting.
+//! Reflectances are textures: a constant, Mitsuba's checkerboard, or an image (`bitmap`).
 
 mod bitmap;
 mod conductor;
