@@ -300,3 +300,10 @@ fn mitsuba_q_bitmap_textures() {
 fn mitsuba_r_serialized_meshes() {
     validate("r-serialized", 4096);
 }
+
+/// Mitsuba's `mask`: opacity over a two-sided diffuse sphere and a plastic floor, crossed as
+/// null events, in fog with a limited depth.
+#[test]
+fn mitsuba_s_masks_in_fog() {
+    validate("s-mask-fog", 4096);
+}

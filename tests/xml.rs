@@ -1071,3 +1071,41 @@ fn bitmap_textures_and_their_errors() {
         assert!(e.contains(needle), "{texture}: {e}");
     }
 }
+
+/// Mitsuba's `mask`: its default opacity, a nested BSDF (here two-sided), and errors for what
+/// zerovar does not take: a mask without a BSDF, around one light passes itself, a textured or
+/// out-of-range opacity, and masks under Mitsuba's `path` integrator.
+#[test]
+fn masks_and_their_errors() {
+    use zerovar::bsdf::{Bsdf, Texture};
+    use zerovar::math::Spectrum;
+    let volpath =
+        |bsdf: &str| sphere_with(bsdf).replace("<sensor", "<integrator type=\"volpath\"/><sensor");
+    let diffuse = "<bsdf type=\"twosided\"><bsdf type=\"diffuse\"/></bsdf>";
+    let s = xml("mask.xml", &volpath(&format!("<bsdf type=\"mask\">{diffuse}</bsdf>")), &[]);
+    let grey = Texture::Constant(Spectrum::splat(0.5));
+    let nested = Box::new(Bsdf::Diffuse { reflectance: grey, two_sided: true });
+    assert_eq!(s.unwrap().surfaces()[0].bsdf, Bsdf::Mask { opacity: 0.5, nested });
+    for (bsdf, needle) in [
+        ("<bsdf type=\"mask\"/>", "mask wraps exactly one <bsdf>"),
+        (
+            "<bsdf type=\"mask\"><bsdf type=\"thindielectric\"/></bsdf>",
+            "a mask around a `thindielectric` (which light passes itself) is not supported",
+        ),
+        (
+            "<bsdf type=\"mask\"><float name=\"opacity\" value=\"1.5\"/><bsdf type=\"diffuse\"/></bsdf>",
+            "opacity 1.5 must lie in [0, 1]",
+        ),
+        (
+            "<bsdf type=\"mask\"><texture type=\"checkerboard\" name=\"opacity\"/><bsdf type=\"diffuse\"/></bsdf>",
+            "a textured opacity is not supported",
+        ),
+    ] {
+        let e = xml("mask-bad.xml", &volpath(bsdf), &[]).unwrap_err().to_string();
+        assert!(e.contains(needle) && e.contains("mask-bad.xml:1:"), "{bsdf}: {e}");
+    }
+    let path = sphere_with("<bsdf type=\"mask\"><bsdf type=\"diffuse\"/></bsdf>")
+        .replace("<sensor", "<integrator type=\"path\"/><sensor");
+    let e = xml("mask-path.xml", &path, &[]).unwrap_err().to_string();
+    assert!(e.contains("a mask under Mitsuba's `path` integrator is not supported"), "{e}");
+}

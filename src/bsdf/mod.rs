@@ -107,6 +107,16 @@ pub enum Bsdf {
     Conductor(Conductor),
     /// Mitsuba's `roughconductor`: a rough metal.
     RoughConductor(RoughConductor),
+    /// Mitsuba's `mask`: the nested BSDF with probability `opacity`, else nothing (light
+    /// passes straight through, as through a null surface: see [`Bsdf::null_transmission`]).
+    /// Where the path scatters, it has already been decided that it does, so the nested
+    /// BSDF's own values and densities apply there.
+    Mask {
+        /// The share of light that meets the nested BSDF.
+        opacity: f32,
+        /// What it meets.
+        nested: Box<Bsdf>,
+    },
 }
 
 /// The parameters of [`Bsdf::Plastic`], with what it precomputes from them.
@@ -215,12 +225,16 @@ impl Bsdf {
         match *self {
             Bsdf::Null => Some(1.0),
             Bsdf::ThinDielectric { eta } => Some(1.0 - thin_reflectance(cos, eta)),
+            Bsdf::Mask { opacity, .. } => Some(1.0 - opacity),
             _ => None,
         }
     }
 
     /// Whether next-event estimation can help at this surface.
     pub fn has_smooth_component(&self) -> bool {
+        if let Bsdf::Mask { nested, .. } = self {
+            return nested.has_smooth_component();
+        }
         matches!(
             self,
             Bsdf::Diffuse { .. }
@@ -236,6 +250,9 @@ impl Bsdf {
     /// field's mixtures resolve, so its own sampling draws every direction; so is a rough
     /// metal's.
     pub fn guides(&self) -> bool {
+        if let Bsdf::Mask { nested, .. } = self {
+            return nested.guides();
+        }
         matches!(self, Bsdf::Diffuse { .. } | Bsdf::Plastic(_) | Bsdf::RoughPlastic(_))
     }
 
@@ -261,6 +278,7 @@ impl Bsdf {
             }
             Bsdf::RoughDielectric(r) => Spectrum::splat(r.eval(wo, wi)),
             Bsdf::RoughConductor(r) => r.eval(wo, wi),
+            Bsdf::Mask { ref nested, .. } => nested.eval(wo, wi, uv),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
                 p.eval(wo, wi, uv)
@@ -287,6 +305,7 @@ impl Bsdf {
             }
             Bsdf::RoughDielectric(r) => r.pdf(wo, wi),
             Bsdf::RoughConductor(r) => r.pdf(wo, wi),
+            Bsdf::Mask { ref nested, .. } => nested.pdf(wo, wi),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
                 p.pdf(wo, wi)
@@ -327,6 +346,7 @@ impl Bsdf {
             Bsdf::RoughDielectric(r) => r.sample(wo, u1, u2),
             Bsdf::Conductor(c) => c.sample(wo),
             Bsdf::RoughConductor(r) => r.sample(wo, u2),
+            Bsdf::Mask { ref nested, .. } => nested.sample(wo, uv, u1, u2),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, _, flipped) = p.front(wo, wo);
                 let bs = p.sample(wo, uv, u1, u2)?;
@@ -574,6 +594,28 @@ mod tests {
             assert_eq!(two.eval(back, wi, Vec2::ZERO), b.eval(r, front.wi, Vec2::ZERO));
             assert_eq!(two.pdf(back, wi), b.pdf(r, front.wi));
         }
+    }
+
+    /// A mask lets `1 - opacity` through as a null crossing; where the path scatters, the
+    /// nested BSDF's own values, densities and samples apply.
+    #[test]
+    fn mask_passes_its_share_and_scatters_as_its_nested_bsdf() {
+        let nested = Bsdf::Diffuse {
+            reflectance: Texture::Constant(Spectrum::splat(0.6)),
+            two_sided: false,
+        };
+        let m = Bsdf::Mask { opacity: 0.3, nested: Box::new(nested.clone()) };
+        assert_eq!(m.null_transmission(0.2), Some(0.7));
+        assert!(m.has_smooth_component() && m.guides());
+        let (wo, wi) =
+            (Vec3A::new(0.3, 0.1, 0.9).normalize(), Vec3A::new(-0.2, 0.4, 0.8).normalize());
+        assert_eq!(m.eval(wo, wi, Vec2::ZERO), nested.eval(wo, wi, Vec2::ZERO));
+        assert_eq!(m.pdf(wo, wi), nested.pdf(wo, wi));
+        let (a, b) = (
+            m.sample(wo, Vec2::ZERO, 0.4, Vec2::splat(0.3)),
+            nested.sample(wo, Vec2::ZERO, 0.4, Vec2::splat(0.3)),
+        );
+        assert_eq!(a.map(|s| (s.wi, s.weight, s.pdf)), b.map(|s| (s.wi, s.weight, s.pdf)));
     }
 
     #[test]

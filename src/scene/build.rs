@@ -258,6 +258,15 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
             kind: d.kind.clone(),
         });
     }
+    if settings.surface_events_only
+        && let Some(i) = surfaces.iter().position(|s| matches!(s.bsdf, Bsdf::Mask { .. }))
+    {
+        cx.at(desc.shapes[i].span().start, format!("shapes[{i}]"));
+        return cx.err(
+            "a mask under Mitsuba's `path` integrator is not supported (zerovar passes masks as \
+             null events); use <integrator type=\"volpath\">",
+        );
+    }
     for (i, l) in desc.lights.iter().enumerate() {
         let d = l.get_ref();
         cx.at(l.span().start, format!("lights[{i}] ({})", d.kind));
@@ -378,19 +387,20 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
     let metal_only =
         [("material", d.material.is_some()), ("eta", d.eta.is_some()), ("k", d.k.is_some())];
     let what = format!("{} surfaces", d.kind);
+    if d.kind != "mask" {
+        cx.only(&what, &[("opacity", d.opacity.is_some()), ("nested", d.nested.is_some())])?;
+    }
+    // What neither a null surface nor a mask (whose parameters are its nested BSDF's) takes.
+    let any_surface =
+        [diffuse_only.as_slice(), &dielectric_only, &plastic_only, &rough_only, &metal_only]
+            .concat();
     match d.kind.as_str() {
+        "mask" => {
+            cx.only(&what, &any_surface)?;
+            mask(cx, d)
+        }
         "null" => {
-            cx.only(
-                &what,
-                &[
-                    diffuse_only.as_slice(),
-                    &dielectric_only,
-                    &plastic_only,
-                    &rough_only,
-                    &metal_only,
-                ]
-                .concat(),
-            )?;
+            cx.only(&what, &any_surface)?;
             Ok(Bsdf::Null)
         }
         "diffuse" => {
@@ -465,6 +475,26 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
              conductor, roughdielectric, roughplastic or roughconductor"
         )),
     }
+}
+
+/// Mitsuba's `mask` around a BSDF that does not itself let light straight through.
+fn mask(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Bsdf> {
+    let Some(inner) = d.nested.as_deref() else {
+        return cx.err("a mask needs the BSDF behind it: `nested = { type = ... }`");
+    };
+    let opacity = d.opacity.unwrap_or(0.5);
+    if !(0.0..=1.0).contains(&opacity) {
+        return cx.err(format!("opacity {opacity} must lie in [0, 1]"));
+    }
+    let nested = bsdf(cx, Some(inner))?;
+    if nested.null_transmission(1.0).is_some() {
+        return cx.err(format!(
+            "a mask around a `{}` (which light passes itself) is not supported; mask a surface \
+             that scatters",
+            inner.kind
+        ));
+    }
+    Ok(Bsdf::Mask { opacity, nested: Box::new(nested) })
 }
 
 /// A conductor's metal: Mitsuba's named `material` (default `none`, a perfect mirror), or its

@@ -181,8 +181,8 @@ pub enum TransformStep {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BsdfDesc {
-    /// "null", "diffuse", "dielectric", "thindielectric", "plastic", "conductor", or the rough
-    /// "roughdielectric", "roughplastic" or "roughconductor".
+    /// "null", "diffuse", "dielectric", "thindielectric", "plastic", "conductor", the rough
+    /// "roughdielectric", "roughplastic" or "roughconductor", or "mask" around another.
     #[serde(rename = "type")]
     pub kind: String,
     /// Diffuse: reflectance (a colour or a checkerboard table).
@@ -212,6 +212,10 @@ pub struct BsdfDesc {
     pub distribution: Option<String>,
     /// The rough kinds: the roughness (default 0.1).
     pub alpha: Option<f32>,
+    /// Mask: the share of light that meets `nested` (default 0.5); the rest passes through.
+    pub opacity: Option<f32>,
+    /// Mask: the BSDF behind the mask.
+    pub nested: Option<Box<BsdfDesc>>,
 }
 
 /// A reflectance: a colour or `{ type = "checkerboard", ... }`.

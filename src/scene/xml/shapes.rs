@@ -15,8 +15,8 @@ use toml::Spanned;
 
 const SHAPES: &str = "sphere, cube, rectangle, disk, obj, ply or serialized";
 const BSDFS: &str = "null, diffuse, dielectric, thindielectric, plastic, conductor, \
-                     roughdielectric, roughplastic, roughconductor, or twosided around diffuse, \
-                     plastic, conductor or their rough kinds";
+                     roughdielectric, roughplastic, roughconductor, mask, or twosided around \
+                     diffuse, plastic, conductor or their rough kinds";
 const EMITTERS: &str = "point, spot, directional, constant, envmap, and area inside a <shape>";
 
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
@@ -149,6 +149,23 @@ pub(super) fn bsdf(conv: &Conv, o: &Rc<Object>) -> Result<BsdfDesc> {
             if o.kind == "roughplastic" {
                 roughness(&p, &mut d)?;
             }
+        }
+        "mask" => {
+            let inner = p.objects("bsdf");
+            d.opacity = match p.raw("opacity") {
+                Some(prop) if matches!(prop.value, Value::Object(_)) => {
+                    return Err(prop.pos.err(
+                        "a textured opacity is not supported; give the mask's opacity as a <float>",
+                    ));
+                }
+                _ => p.float("opacity")?,
+            };
+            p.finish()?;
+            let [(_, inner)] = inner.as_slice() else {
+                return Err(p.err("mask wraps exactly one <bsdf>"));
+            };
+            d.nested = Some(Box::new(bsdf(conv, inner)?));
+            return Ok(d);
         }
         "twosided" => {
             let inner = p.objects("bsdf");
