@@ -4,7 +4,7 @@
 //! default, Mitsuba's `none`, reflects everything). One-sided unless two-sided.
 
 use super::microfacet::Microfacet;
-use super::{BsdfSample, mirror};
+use super::{BsdfSample, front_side, mirror};
 use crate::math::{Spectrum, reflect};
 use glam::{Vec2, Vec3A};
 
@@ -52,7 +52,7 @@ impl Metal {
 
     /// `wo` and `wi` as the front sees them, and whether they were mirrored.
     fn front(&self, wo: Vec3A, wi: Vec3A) -> (Vec3A, Vec3A, bool) {
-        if self.two_sided && wo.z < 0.0 { (mirror(wo), mirror(wi), true) } else { (wo, wi, false) }
+        front_side(self.two_sided, wo, wi)
     }
 }
 

@@ -192,7 +192,7 @@ fn beckmann_slope_x(cos_theta: f64, u: f32) -> f64 {
 
 /// The `x` in `[lo, hi]` where the increasing function `f` (returning value and derivative)
 /// reaches `target`: Newton's steps, falling back to bisection whenever a step leaves the
-/// bracket, to double precision.
+/// bracket, until a step moves less than 1e-10 (far below what single precision keeps).
 fn invert_increasing(f: impl Fn(f64) -> (f64, f64), target: f64, lo: f64, hi: f64) -> f64 {
     let (mut lo, mut hi) = (lo, hi);
     // The distributions inverted here have their bulk about 0.

@@ -141,8 +141,7 @@ pub struct Plastic {
 impl Plastic {
     /// A plastic with Mitsuba's derived constants.
     pub fn new(diffuse: Texture, specular: Spectrum, eta: f32, nonlinear: bool) -> Self {
-        let (d, s) = (channel_mean(diffuse.mean()), channel_mean(specular));
-        let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
+        let specular_weight = specular_sampling_weight(&diffuse, specular);
         let fdr_int = fresnel_diffuse_reflectance(1.0 / eta);
         Self { diffuse, specular, eta, nonlinear, two_sided: false, fdr_int, specular_weight }
     }
@@ -152,34 +151,60 @@ impl Plastic {
         Self { two_sided, ..self }
     }
 
-    /// The directions `wo`, `wi` as the front side sees them: both mirrored through the surface
-    /// where a two-sided plastic is seen from behind.
+    /// The directions `wo`, `wi` as the front side sees them.
     fn front(&self, wo: Vec3A, wi: Vec3A) -> (Vec3A, Vec3A, bool) {
-        if self.two_sided && wo.z < 0.0 { (mirror(wo), mirror(wi), true) } else { (wo, wi, false) }
+        front_side(self.two_sided, wo, wi)
     }
 
     /// The probability of sampling the specular lobe for `cos_o` (Fresnel times its weight).
     fn specular_probability(&self, f_o: f32) -> f32 {
-        let spec = f_o * self.specular_weight;
-        let diff = (1.0 - f_o) * (1.0 - self.specular_weight);
-        if spec + diff > 0.0 { spec / (spec + diff) } else { 0.0 }
+        specular_share(f_o, 1.0 - f_o, self.specular_weight)
     }
 
     /// The diffuse lobe's BSDF (without the cosine) for Fresnel terms `f_o` and `f_i`.
     fn diffuse_value(&self, uv: Vec2, f_o: f32, f_i: f32) -> Spectrum {
-        let d = self.diffuse.eval(uv);
-        let inner = if self.nonlinear {
-            Spectrum::ONE - d * self.fdr_int
-        } else {
-            Spectrum::splat(1.0 - self.fdr_int)
-        };
-        d / inner * ((1.0 - f_o) * (1.0 - f_i) / (self.eta * self.eta) * FRAC_1_PI)
+        let base = under_coating(self.diffuse.eval(uv), self.fdr_int, self.nonlinear);
+        base * ((1.0 - f_o) * (1.0 - f_i) / (self.eta * self.eta) * FRAC_1_PI)
     }
 }
 
 /// `v` mirrored through the surface plane.
 fn mirror(v: Vec3A) -> Vec3A {
     Vec3A::new(v.x, v.y, -v.z)
+}
+
+/// `wo` and `wi` as the front of a surface sees them, and whether they were mirrored: a
+/// two-sided surface seen from behind behaves as its front.
+fn front_side(two_sided: bool, wo: Vec3A, wi: Vec3A) -> (Vec3A, Vec3A, bool) {
+    if two_sided && wo.z < 0.0 { (mirror(wo), mirror(wi), true) } else { (wo, wi, false) }
+}
+
+/// A sample drawn on the front side, mirrored back where the front was a mirror image.
+fn from_front(bs: BsdfSample, flipped: bool) -> BsdfSample {
+    BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs }
+}
+
+/// How strongly a coated surface samples its specular lobe against its base, as Mitsuba
+/// weighs them: the mean specular factor over the sum of it and the base's mean albedo.
+fn specular_sampling_weight(diffuse: &Texture, specular: Spectrum) -> f32 {
+    let (d, s) = (channel_mean(diffuse.mean()), channel_mean(specular));
+    if d + s > 0.0 { s / (d + s) } else { 0.5 }
+}
+
+/// The probability of the specular lobe, given the coating's reflected and transmitted shares
+/// at the incoming angle and the sampling weight.
+fn specular_share(reflected: f32, transmitted: f32, weight: f32) -> f32 {
+    let spec = reflected * weight;
+    let diff = transmitted * (1.0 - weight);
+    if spec + diff > 0.0 { spec / (spec + diff) } else { 0.0 }
+}
+
+/// A base of albedo `d` under a coating that reflects `internal` of the diffuse light inside
+/// back down: brightened by 1 / (1 - internal), or tinted, 1 / (1 - d internal), if `nonlinear`.
+fn under_coating(d: Spectrum, internal: f32, nonlinear: bool) -> Spectrum {
+    let inner =
+        if nonlinear { Spectrum::ONE - d * internal } else { Spectrum::splat(1.0 - internal) };
+    d / inner
 }
 
 /// The mean of the three channels.
@@ -340,8 +365,7 @@ impl Bsdf {
             Bsdf::ThinDielectric { eta } => Some(sample_thin_dielectric(eta, wo, u1)),
             Bsdf::Plastic(ref p) => {
                 let (wo, _, flipped) = p.front(wo, wo);
-                let bs = sample_plastic(p, wo, uv, u1, u2)?;
-                Some(BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs })
+                Some(from_front(sample_plastic(p, wo, uv, u1, u2)?, flipped))
             }
             Bsdf::RoughDielectric(r) => r.sample(wo, u1, u2),
             Bsdf::Conductor(c) => c.sample(wo),
@@ -349,8 +373,7 @@ impl Bsdf {
             Bsdf::Mask { ref nested, .. } => nested.sample(wo, uv, u1, u2),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, _, flipped) = p.front(wo, wo);
-                let bs = p.sample(wo, uv, u1, u2)?;
-                Some(BsdfSample { wi: if flipped { mirror(bs.wi) } else { bs.wi }, ..bs })
+                Some(from_front(p.sample(wo, uv, u1, u2)?, flipped))
             }
         }
     }

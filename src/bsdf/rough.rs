@@ -8,7 +8,10 @@
 //! and guiding, which evaluate both, see the same numbers.
 
 use super::microfacet::{Microfacet, directional_albedo};
-use super::{BsdfSample, Texture, channel_mean, fresnel, mirror, refract};
+use super::{
+    BsdfSample, Texture, fresnel, front_side, refract, specular_sampling_weight, specular_share,
+    under_coating,
+};
 use crate::math::{Spectrum, cosine_hemisphere, reflect};
 use glam::{Vec2, Vec3A};
 use std::f32::consts::FRAC_1_PI;
@@ -142,8 +145,7 @@ impl RoughPlastic {
         nonlinear: bool,
         microfacet: Microfacet,
     ) -> Self {
-        let (d, s) = (channel_mean(diffuse.mean()), channel_mean(specular));
-        let specular_weight = if d + s > 0.0 { s / (d + s) } else { 0.5 };
+        let specular_weight = specular_sampling_weight(&diffuse, specular);
         let cosines = (0..TABLE).map(|i| (i as f32 / (TABLE - 1) as f32).max(1e-6));
         let mut transmission = [0.0; TABLE];
         let mut internal = 0.0;
@@ -173,7 +175,7 @@ impl RoughPlastic {
 
     /// `wo` and `wi` as the front sees them, and whether they were mirrored.
     pub(super) fn front(&self, wo: Vec3A, wi: Vec3A) -> (Vec3A, Vec3A, bool) {
-        if self.two_sided && wo.z < 0.0 { (mirror(wo), mirror(wi), true) } else { (wo, wi, false) }
+        front_side(self.two_sided, wo, wi)
     }
 
     /// The coating's transmission at `cos`, linear in the table.
@@ -186,9 +188,7 @@ impl RoughPlastic {
 
     fn specular_probability(&self, cos_o: f32) -> f32 {
         let t = self.transmission(cos_o);
-        let spec = (1.0 - t) * self.specular_weight;
-        let diff = t * (1.0 - self.specular_weight);
-        if spec + diff > 0.0 { spec / (spec + diff) } else { 0.0 }
+        specular_share(1.0 - t, t, self.specular_weight)
     }
 
     /// BSDF times cos wi, front side.
@@ -200,14 +200,9 @@ impl RoughPlastic {
         let h = (wo + wi).normalize();
         let f = fresnel(wo.dot(h), self.eta).0;
         let specular = self.specular * (f * mf.d(h) * mf.g(wo, wi, h) / (4.0 * wo.z));
-        let d = self.diffuse.eval(uv);
-        let inner = if self.nonlinear {
-            Spectrum::ONE - d * self.internal
-        } else {
-            Spectrum::splat(1.0 - self.internal)
-        };
+        let base = under_coating(self.diffuse.eval(uv), self.internal, self.nonlinear);
         let through = self.transmission(wo.z) * self.transmission(wi.z);
-        specular + d / inner * (FRAC_1_PI / (self.eta * self.eta) * wi.z * through)
+        specular + base * (FRAC_1_PI / (self.eta * self.eta) * wi.z * through)
     }
 
     /// The density of [`Self::sample`], front side.

@@ -536,7 +536,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         let at = SurfacePoint::new(scene, hit, s.ray.direction);
         let guide = settings.guide;
         let smooth = at.bsdf.has_smooth_component();
-        let guides = smooth && at.bsdf.guides();
+        let guides = at.bsdf.guides();
         let loaded = guides && guide.any() && self.ctx.cache.load(hit.p, self.sampler.next_1d());
         self.counters.field_lookups += u64::from(loaded);
         // Surfaces have a share of their own (`render::DEFAULT_SURFACE_ALPHA`).
