@@ -11,7 +11,7 @@ use std::path::Path;
 use std::time::Duration;
 use zerovar::guided::distance::{GuidedDistance, SEGMENTS};
 use zerovar::guided::{Components, FieldCache, NoCache, RadianceCache, TrainedField};
-use zerovar::integrators::walk::{WalkContext, WalkSettings, radiance};
+use zerovar::integrators::walk::{PathStart, WalkContext, WalkSettings, radiance};
 use zerovar::integrators::{VolPath, shadow_transmittance};
 use zerovar::math::Ray;
 use zerovar::phase::PhaseFunction;
@@ -140,9 +140,10 @@ fn paths<C: RadianceCache>(
     let mut sum = 0.0;
     for i in first..first + BATCH {
         let mut s = Sampler::new(4, 0, i);
-        let ray = camera_ray(scene, &mut s);
+        let [w, h] = scene.camera().resolution().map(|r| r as f32);
+        let start = PathStart::camera(scene, s.next_2d() * Vec2::new(w, h));
         let mut ctx = WalkContext { cache: &mut *cache, pixel: None, recorder: None, trace: None };
-        sum += radiance(settings, scene, ray, scene.camera_medium(), &mut ctx, &mut s, counters).x;
+        sum += radiance(settings, scene, start, &mut ctx, &mut s, counters).x;
     }
     sum
 }

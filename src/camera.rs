@@ -1,6 +1,8 @@
 //! The perspective pinhole camera, placed by a look-at transform (Mitsuba 3 conventions: the
 //! field of view is measured along the horizontal axis by default, image x runs to the right
 //! and image y downwards), with a box pixel filter: a sample lands uniformly in its pixel.
+//! Its rays start on the near clipping plane and reach the far one, as Mitsuba's do: for a
+//! camera inside a medium, the near plane decides how much of it lies before the first ray.
 
 use crate::math::Ray;
 use crate::transform::Transform;
@@ -24,6 +26,9 @@ pub struct Camera {
     origin: Vec3A,
     tan_half: Vec2,
     resolution: [u32; 2],
+    /// Distances of the clipping planes from the eye, along the view axis.
+    near: f32,
+    far: f32,
 }
 
 impl Camera {
@@ -37,7 +42,14 @@ impl Camera {
             FovAxis::Y => Vec2::new(t * aspect, t),
         };
         let origin = to_world.point(Vec3A::ZERO);
-        Self { to_world, origin, tan_half, resolution }
+        Self { to_world, origin, tan_half, resolution, near: 0.0, far: f32::INFINITY }
+    }
+
+    /// The camera with clipping planes `near` and `far` (distances along the view axis, with
+    /// `0 <= near < far`; the far plane may be infinite): nothing nearer than the near plane
+    /// is seen, medium included, and nothing beyond the far one.
+    pub fn with_clip(self, near: f32, far: f32) -> Self {
+        Self { near, far, ..self }
     }
 
     /// Image width and height in pixels.
@@ -50,9 +62,16 @@ impl Camera {
         self.origin
     }
 
-    /// The primary ray through film position `film` (pixels, continuous, origin top left).
+    /// The primary ray through film position `film` (pixels, continuous, origin top left),
+    /// starting on the near clipping plane.
     #[inline]
     pub fn ray(&self, film: Vec2) -> Ray {
+        self.ray_and_reach(film).0
+    }
+
+    /// The primary ray through `film`, and how far along it the far clipping plane lies.
+    #[inline]
+    pub fn ray_and_reach(&self, film: Vec2) -> (Ray, f32) {
         let ndc = Vec2::new(film.x / self.resolution[0] as f32, film.y / self.resolution[1] as f32);
         // Local +x is the camera's left, +y its up (look-at frame), so both axes flip.
         let local = Vec3A::new(
@@ -60,7 +79,11 @@ impl Camera {
             (1.0 - 2.0 * ndc.y) * self.tan_half.y,
             1.0,
         );
-        Ray::new(self.origin, self.to_world.vector(local).normalize())
+        // The local direction's length is 1 / cos of its angle to the view axis, along which
+        // the planes' distances are measured.
+        let (direction, secant) = (self.to_world.vector(local).normalize(), local.length());
+        let origin = self.origin + direction * (self.near * secant);
+        (Ray::new(origin, direction), (self.far - self.near) * secant)
     }
 }
 
@@ -79,5 +102,26 @@ mod tests {
         assert!((right - Vec3A::new(1.0, 0.0, -1.0).normalize()).length() < 1e-5, "{right}");
         let top = cam.ray(Vec2::new(100.0, 0.0)).direction;
         assert!((top - Vec3A::new(0.0, 0.5, -1.0).normalize()).length() < 1e-5, "{top}");
+    }
+
+    #[test]
+    fn rays_run_from_the_near_plane_to_the_far_one() {
+        let to_world = Transform::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y).unwrap();
+        let cam = Camera::new(to_world, 90.0, FovAxis::X, [200, 100]).with_clip(0.5, 4.0);
+        // The image's right edge centre looks 45 degrees off the axis: the planes lie sqrt 2
+        // times farther along that ray than along the axis.
+        for (film, secant) in
+            [(Vec2::new(100.0, 50.0), 1.0f32), (Vec2::new(200.0, 50.0), 2f32.sqrt())]
+        {
+            let (ray, reach) = cam.ray_and_reach(film);
+            let start = Vec3A::new(0.0, 0.0, 5.0) + ray.direction * (0.5 * secant);
+            assert!((ray.origin - start).length() < 1e-5, "{film}: {}", ray.origin);
+            assert!((ray.origin.z - 4.5).abs() < 1e-5, "the near plane is z = 4.5");
+            assert!((reach - 3.5 * secant).abs() < 1e-5, "{film}: reach {reach}");
+            assert!((ray.at(reach).z - 1.0).abs() < 1e-5, "the far plane is z = 1");
+        }
+        let unclipped = Camera::new(to_world, 90.0, FovAxis::X, [200, 100]);
+        let (ray, reach) = unclipped.ray_and_reach(Vec2::new(10.0, 20.0));
+        assert_eq!((ray.origin, reach), (Vec3A::new(0.0, 0.0, 5.0), f32::INFINITY));
     }
 }

@@ -199,8 +199,11 @@ fn fog_sphere_in_code(resolution: [u32; 2]) -> zerovar::scene::SceneBuilder {
         BsdfDesc, CameraDesc, CheckerboardDesc, LightDesc, MediumDesc, PhaseDesc, Rgb, ShapeDesc,
         TextureDesc, TransformStep,
     };
-    let camera =
-        CameraDesc::look_at(Vec3::new(0.0, 2.2, 6.5), Vec3::new(0.0, 0.9, 0.0), 40.0, resolution);
+    let camera = CameraDesc {
+        near_clip: 0.01,
+        far_clip: 1e4,
+        ..CameraDesc::look_at(Vec3::new(0.0, 2.2, 6.5), Vec3::new(0.0, 0.9, 0.0), 40.0, resolution)
+    };
     let fog = MediumDesc {
         phase: Some(PhaseDesc::hg(0.3)),
         ..MediumDesc::homogeneous(Rgb::Grey(1.5), Rgb::Grey(0.9))

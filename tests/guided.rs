@@ -32,8 +32,8 @@ fn camera_sample<C: RadianceCache>(
 ) -> Spectrum {
     let mut sampler = Sampler::new(stream, 0, i);
     let [w, h] = s.camera().resolution();
-    let ray = s.camera().ray(sampler.next_2d() * Vec2::new(w as f32, h as f32));
-    walk::radiance(settings, s, ray, s.camera_medium(), ctx, &mut sampler, counters)
+    let film = sampler.next_2d() * Vec2::new(w as f32, h as f32);
+    walk::radiance(settings, s, walk::PathStart::camera(s, film), ctx, &mut sampler, counters)
 }
 
 /// A cache with fixed estimates: `incident` and `inscattered` times a bright blob around

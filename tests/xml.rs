@@ -147,7 +147,8 @@ transform = [{ scale = [2, 1, 1] }, { rotate = { axis = [1, 0, 0], angle = -90 }
         let s = xml("camera.xml", &with_camera(to_world, rect), &[]).unwrap();
         for film in [Vec2::new(0.0, 0.0), Vec2::new(15.0, 20.0), Vec2::new(30.0, 7.0)] {
             let (a, b) = (t.camera().ray(film), s.camera().ray(film));
-            assert!((a.origin - b.origin).abs().max_element() < 1e-5, "{to_world}");
+            let eyes = (t.camera().origin(), s.camera().origin());
+            assert!((eyes.0 - eyes.1).abs().max_element() < 1e-5, "{to_world}");
             assert!((a.direction - b.direction).abs().max_element() < 1e-5, "{to_world}");
         }
         assert_eq!(s.bounds().min, t.bounds().min);
@@ -512,6 +513,8 @@ target = [0, 0, 0]
 fov = 50
 fov_axis = "y"
 resolution = [30, 40]
+near_clip = 0.01
+far_clip = 1e4
 
 [media.m]
 type = "grid"
@@ -1108,4 +1111,99 @@ fn masks_and_their_errors() {
         .replace("<sensor", "<integrator type=\"path\"/><sensor");
     let e = xml("mask-path.xml", &path, &[]).unwrap_err().to_string();
     assert!(e.contains("a mask under Mitsuba's `path` integrator is not supported"), "{e}");
+}
+
+/// Mitsuba's sensor starts its rays on the near clipping plane (0.01 from the eye by default)
+/// and sees nothing beyond the far one (1e4): a camera in a medium skips the medium before
+/// the near plane, and surfaces outside the two planes are not seen.
+#[test]
+fn camera_rays_run_between_mitsubas_clipping_planes() {
+    use zerovar::guided::NoCache;
+    use zerovar::integrators::VolPath;
+    use zerovar::integrators::walk::{PathStart, WalkContext, radiance};
+    use zerovar::rng::Sampler;
+    use zerovar::stats::Counters;
+    use zerovar_testkit::MeanEstimate;
+
+    // An absorbing medium around the camera, 5 units from a large emitting rectangle that
+    // faces it: along the view axis the pixel sees exp(-sigma_t (5 - near)).
+    let scene = |clip: &str| {
+        let lookat = r#"<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#;
+        let camera = CAMERA
+            .replace("TO_WORLD", lookat)
+            .replace("<film", &format!("{clip}<ref id=\"dark\"/><film"));
+        let text = format!(
+            r#"<scene version="3.0.0">
+            <medium type="homogeneous" id="dark">
+                <float name="sigma_t" value="0.2"/>
+                <float name="albedo" value="0"/>
+            </medium>{camera}
+            <integrator type="volpath"/>
+            <shape type="rectangle">
+                <transform name="to_world"><scale value="100"/></transform>
+                <emitter type="area"><rgb name="radiance" value="1"/></emitter>
+            </shape></scene>"#
+        );
+        xml("clip.xml", &text, &[]).unwrap_or_else(|e| panic!("{e}"))
+    };
+    let axis = Vec2::new(15.0, 20.0); // the film's centre: the view axis
+    let seen = |s: &Scene| {
+        let settings = VolPath::from_scene(s).settings();
+        let mut counters = Counters::default();
+        let est: MeanEstimate = (0..40_000)
+            .map(|i| {
+                let mut sampler = Sampler::new(9, 0, i);
+                let mut cache = NoCache;
+                let mut ctx = WalkContext::new(&mut cache);
+                let start = PathStart::camera(s, axis);
+                f64::from(radiance(&settings, s, start, &mut ctx, &mut sampler, &mut counters).x)
+            })
+            .collect();
+        est
+    };
+    let clip = |near: f32, far: f32| {
+        format!(r#"<float name="near_clip" value="{near}"/><float name="far_clip" value="{far}"/>"#)
+    };
+    // Mitsuba's defaults, then a near plane 2 units out: transmittances 0.369 and 0.549, each
+    // estimated to about 0.7%.
+    for (s, near) in [(scene(""), 0.01f64), (scene(&clip(2.0, 1e4)), 2.0)] {
+        let (ray, reach) = s.camera().ray_and_reach(axis);
+        assert!((f64::from(ray.origin.z) - (5.0 - near)).abs() < 1e-5, "{}", ray.origin);
+        let (est, expected) = (seen(&s), (-0.2 * (5.0 - near)).exp());
+        // Closed-form tracking may weigh the flight by its transmittance exactly.
+        if est.std_error() > 0.0 {
+            est.assert_matches(expected, 4.5, &format!("near_clip {near}"));
+        } else {
+            assert!((est.mean / expected - 1.0).abs() < 1e-5, "near_clip {near}: {est:?}");
+        }
+        assert!(reach > 9000.0);
+    }
+    // The rectangle before the near plane or beyond the far one is not seen.
+    for (near, far) in [(5.5, 1e4), (0.01, 4.0)] {
+        let s = scene(&clip(near, far));
+        let est = seen(&s);
+        assert_eq!(est.mean, 0.0, "near {near}, far {far}: the rectangle was seen");
+    }
+    // Mitsuba's own rules for the two planes.
+    for (near, far, what) in [
+        (0.0, 1e4, "near_clip 0 must be greater than 0"),
+        (2.0, 1.0, "far_clip 1 must be greater than near_clip 2"),
+    ] {
+        let lookat = r#"<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#;
+        let text = with_camera(lookat, "").replace("<film", &format!("{}<film", clip(near, far)));
+        let e = xml("clip-bad.xml", &text, &[]).unwrap_err().to_string();
+        assert!(e.contains(what) && e.contains("clip-bad.xml"), "{e}");
+    }
+    // TOML cameras take the same two settings (no clipping by default), with the same checks.
+    let bad = [
+        ("near_clip = -1", "near_clip -1 must be a finite distance, 0 or more"),
+        ("near_clip = 2\nfar_clip = 2", "far_clip 2 must lie beyond near_clip 2"),
+    ];
+    for (clip, what) in bad {
+        let text = format!(
+            "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\nresolution = [8, 8]\n{clip}\n"
+        );
+        let e = load_str(&temp_dir().join("clip.toml"), &text, &[]).unwrap_err().to_string();
+        assert!(e.contains(what) && e.contains("clip.toml"), "{e}");
+    }
 }

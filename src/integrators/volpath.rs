@@ -52,6 +52,7 @@ impl VolPath {
         counters: &mut Counters,
     ) -> Spectrum {
         let mut ctx = WalkContext { cache: &mut NoCache, pixel: None, recorder: None, trace: None };
-        walk::radiance(&self.settings(), scene, ray, medium, &mut ctx, sampler, counters)
+        let start = walk::PathStart::unbounded(ray, medium);
+        walk::radiance(&self.settings(), scene, start, &mut ctx, sampler, counters)
     }
 }

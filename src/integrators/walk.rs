@@ -120,6 +120,35 @@ struct PathState {
     /// How much the path's guided decisions have multiplied its weight relative to standard
     /// sampling (the product of standard over mixture densities).
     guided_gain: f32,
+    /// How far the next segment may reach: the camera's far clipping plane for the first,
+    /// unbounded after it.
+    reach: f32,
+}
+
+/// Where a path starts: its first ray, how far that ray sees (a camera's far clipping plane,
+/// infinite for other rays) and the medium it starts in.
+#[derive(Clone, Copy, Debug)]
+pub struct PathStart {
+    /// The first ray.
+    pub ray: Ray,
+    /// Distance along it beyond which nothing is seen.
+    pub reach: f32,
+    /// The medium its origin lies in.
+    pub medium: Option<u32>,
+}
+
+impl PathStart {
+    /// A ray from `medium` that sees as far as it goes.
+    pub fn unbounded(ray: Ray, medium: Option<u32>) -> Self {
+        Self { ray, reach: f32::INFINITY, medium }
+    }
+
+    /// The camera ray of `scene` through film position `film` (pixels), clipped as the
+    /// camera clips.
+    pub fn camera(scene: &Scene, film: Vec2) -> Self {
+        let (ray, reach) = scene.camera.ray_and_reach(film);
+        Self { ray, reach, medium: scene.camera_medium }
+    }
 }
 
 /// Split copies waiting to be traced, and how many walks this camera sample has made.
@@ -130,12 +159,11 @@ struct Branches {
     walks: usize,
 }
 
-/// Estimates the radiance arriving along `ray`, which starts in `medium`.
+/// Estimates the radiance arriving at the start of a path along its first ray.
 pub fn radiance<C: RadianceCache>(
     settings: &WalkSettings,
     scene: &Scene,
-    ray: Ray,
-    medium: Option<u32>,
+    start: PathStart,
     ctx: &mut WalkContext<'_, C>,
     sampler: &mut Sampler,
     counters: &mut Counters,
@@ -146,9 +174,10 @@ pub fn radiance<C: RadianceCache>(
     if settings.max_depth == Some(0) {
         return Spectrum::ZERO;
     }
+    let PathStart { ray, reach, medium } = start;
     let prev = Previous { position: ray.origin, pdf: 1.0, delta: true };
-    let state =
-        PathState { ray, medium, beta: Spectrum::ONE, eta: 1.0, depth: 0, prev, guided_gain: 1.0 };
+    let (beta, guided_gain) = (Spectrum::ONE, 1.0);
+    let state = PathState { ray, medium, beta, eta: 1.0, depth: 0, prev, guided_gain, reach };
     let mut branches = Branches { stack: ArrayVec::new(), walks: 1 };
     branches.stack.push(state);
     let mut l = Spectrum::ZERO;
@@ -185,8 +214,11 @@ fn walk<C: RadianceCache>(
     let mut nulls = 0u32;
     loop {
         w.counters.segments += 1;
-        let hit = scene.intersect(&s.ray, f32::INFINITY);
-        let t_max = hit.as_ref().map_or(f32::INFINITY, |h| h.t);
+        // Only a camera ray's segment is bounded (by the far clipping plane); what follows,
+        // split copies included, is not.
+        let reach = std::mem::replace(&mut s.reach, f32::INFINITY);
+        let hit = scene.intersect(&s.ray, reach);
+        let t_max = hit.as_ref().map_or(reach, |h| h.t);
         // Guided decisions mix with standard sampling at `alpha`; without weight windows to
         // split heavy paths, only until they have compounded the path's weight past
         // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.

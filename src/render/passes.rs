@@ -264,8 +264,8 @@ pub(super) fn camera_sample<C: RadianceCache>(
     let pixel = u64::from(y) * u64::from(scene.camera.resolution()[0]) + u64::from(x);
     let mut sampler = Sampler::new(seed, pixel, u64::from(s));
     let jitter = sampler.next_2d();
-    let ray = scene.camera.ray(Vec2::new(x as f32, y as f32) + jitter);
-    walk::radiance(settings, scene, ray, scene.camera_medium, ctx, &mut sampler, counters)
+    let start = walk::PathStart::camera(scene, Vec2::new(x as f32, y as f32) + jitter);
+    walk::radiance(settings, scene, start, ctx, &mut sampler, counters)
 }
 
 /// Merges a pass's largest samples into `largest` and, for the firefly diagnostic's replays,

@@ -69,7 +69,15 @@ fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
             cam.resolution
         ));
     }
-    Ok(Camera::new(to_world, cam.fov, cam.fov_axis, resolution))
+    if !(cam.near_clip >= 0.0 && cam.near_clip.is_finite()) {
+        return cx.err(format!("near_clip {} must be a finite distance, 0 or more", cam.near_clip));
+    }
+    if cam.far_clip.is_nan() || cam.far_clip <= cam.near_clip {
+        return cx
+            .err(format!("far_clip {} must lie beyond near_clip {}", cam.far_clip, cam.near_clip));
+    }
+    let camera = Camera::new(to_world, cam.fov, cam.fov_axis, resolution);
+    Ok(camera.with_clip(cam.near_clip, cam.far_clip))
 }
 
 /// The file being built and the element being looked at, for error messages.

@@ -127,6 +127,8 @@ impl CameraDesc {
             fov_axis: Default::default(),
             resolution: resolution.map(i64::from),
             medium: None,
+            near_clip: 0.0,
+            far_clip: f32::INFINITY,
         }
     }
 }

@@ -142,10 +142,21 @@ pub struct CameraDesc {
     pub resolution: [i64; 2],
     /// Medium around the camera (default: the global medium).
     pub medium: Option<String>,
+    /// Distance of the near clipping plane from the eye, along the view axis: rays start on
+    /// it (default 0; Mitsuba's XML default is 0.01).
+    #[serde(default)]
+    pub near_clip: f32,
+    /// Distance of the far clipping plane: nothing beyond it is seen (default: none).
+    #[serde(default = "no_far_clip")]
+    pub far_clip: f32,
 }
 
 fn up() -> Vec3 {
     Vec3::Y
+}
+
+fn no_far_clip() -> f32 {
+    f32::INFINITY
 }
 
 /// One step of a transform list, applied in the order written.

@@ -122,9 +122,19 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
     }
     let fov_axis = p.string("fov_axis")?;
     let steps = p.transform("to_world")?.unwrap_or(&[]);
-    // Accepted as in Mitsuba; zerovar does not clip.
-    p.float("near_clip")?;
-    p.float("far_clip")?;
+    // Mitsuba's defaults and rules: its camera rays start on the near plane.
+    let near_clip = p.float("near_clip")?.unwrap_or(0.01);
+    let far_clip = p.float("far_clip")?.unwrap_or(1e4);
+    if !(near_clip > 0.0 && near_clip.is_finite()) {
+        return Err(
+            p.err(format!("near_clip {near_clip} must be greater than 0 (as Mitsuba asks)"))
+        );
+    }
+    if far_clip.is_nan() || far_clip <= near_clip {
+        return Err(p.err(format!(
+            "far_clip {far_clip} must be greater than near_clip {near_clip} (as Mitsuba asks)"
+        )));
+    }
     let medium = p.object("medium")?.map(|m| conv.medium(m)).transpose()?;
     let resolution = match p.object("film")? {
         Some(f) => film(f)?,
@@ -188,7 +198,8 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
             (origin, origin + Vec3::from(m.z_axis), Vec3::from(m.y_axis))
         }
     };
-    let camera = CameraDesc { origin, target, up, fov, fov_axis, resolution, medium };
+    let camera =
+        CameraDesc { origin, target, up, fov, fov_axis, resolution, medium, near_clip, far_clip };
     Ok((spanned(&o.pos, camera), render))
 }
 
