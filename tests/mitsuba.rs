@@ -266,9 +266,8 @@ fn mitsuba_k_fog_room_walls_without_media() {
 }
 
 /// Mitsuba's smooth `plastic`: default coating over a coloured base, and a nonlinear one with
-/// a checkered base and a tinted specular reflection, in fog. At 2048 spp the share of
-/// pixel-channels at |z| > 3 sits at the 2% bound (2.01%): the specular floor's samples are
-/// skewed, and the share falls as samples grow (0.54% at 16384), as skew and not bias does.
+/// a checkered base and a tinted specular reflection, in fog. The specular floor's skewed
+/// samples need 4096 spp for trustworthy standard errors (docs/experiments.md).
 #[test]
 fn mitsuba_n_smooth_plastic_in_fog() {
     validate("n-plastic-fog", 4096);
