@@ -7,7 +7,7 @@
 //! only, never on the thread count or the tile schedule.
 
 use crate::film::Film;
-use crate::guided::{DirectFluence, TrainedField};
+use crate::guided::{Components, DirectFluence, TrainedField};
 use crate::integrators::VolPath;
 use crate::integrators::walk::WalkSettings;
 use crate::scene::Scene;
@@ -161,7 +161,7 @@ pub fn render(
             guided_tiles: None,
         };
         let options = &after_training(options, &report);
-        if let Some(early) = early.as_deref().filter(|e| decisive(e)) {
+        if let Some(early) = early.as_deref().filter(|e| decisive(e, options.guiding.components)) {
             let early = early.clone();
             return Ok(guided_everywhere(
                 scene, options, guidance, films, threads, progress, report, early,
@@ -181,20 +181,26 @@ pub fn render(
 /// pilot of at least 4 spp per candidate, are whole samples), so the render is unguided.
 pub const MIN_ADAPTIVE_SPP: u32 = 16;
 
-/// The early look's validated gain, guiding every tile, from which adaptive guiding skips its
-/// pilot after training and guides every tile with the early look's candidate: the field only
-/// improves with training, and where a field of 3 spp already halves the work of an image, the
-/// pilot (a tenth of the budget or more) could only confirm it. Twice, as much as a partial
-/// choice must gain over guiding everywhere (`select::PARTIAL_MARGIN`).
+/// The gain, guiding every tile, from which the early look settles adaptive guiding's choice:
+/// the pilot after training is skipped and every tile guided with the early look's candidate.
+/// The field only improves with training, and where a field of 3 spp already halves the work
+/// of an image, the pilot (a tenth of the budget or more) could only confirm it. Twice, as much
+/// as a partial choice must gain over guiding everywhere (`select::PARTIAL_MARGIN`).
 const DECISIVE_GAIN: f64 = 2.0;
 
-/// Whether the early look settles adaptive guiding's choice (see [`DECISIVE_GAIN`]); never
-/// where its pilot cannot be trusted ([`EARLY_TAIL_LIMIT`]).
-fn decisive(early: &Selection) -> bool {
-    early.guided_tiles == early.tiles && early.validated_gain >= DECISIVE_GAIN && trusted(early)
+/// Whether the early look settles adaptive guiding's choice: its winner is the `requested`
+/// components, it guides every tile, and each half of its pilot, judged by the other, gains at
+/// least [`DECISIVE_GAIN`]. Both halves, not their geometric mean: where rare bright paths
+/// make the error, one unguided firefly in one half can lift the mean past any bound, but not
+/// the half without it. Not roulette alone: it wins early on a young field and loses to full
+/// guiding once the field has trained (see docs/experiments.md).
+fn decisive(early: &Selection, requested: Components) -> bool {
+    early.components == requested.name()
+        && early.guided_tiles == early.tiles
+        && early.one_way_gains.iter().all(|&g| g >= DECISIVE_GAIN)
 }
 
-/// The render phase guiding every tile with the early look's candidate, without a pilot.
+/// The render phase guiding every tile with the requested components, without a pilot.
 #[allow(clippy::too_many_arguments)]
 fn guided_everywhere(
     scene: &Scene,
@@ -206,12 +212,8 @@ fn guided_everywhere(
     report: TrainingReport,
     early: Selection,
 ) -> RenderResult {
-    let mut options = options.clone();
-    if let Some(components) = crate::guided::Components::parse(&early.components) {
-        options.guiding.components = components;
-    }
     let mut result =
-        final_phase(scene, &options, Some(guidance), films, threads, progress, Some(report));
+        final_phase(scene, options, Some(guidance), films, threads, progress, Some(report));
     result.selection = Some(Selection { decided_early: true, seconds: 0.0, ..early });
     result
 }
@@ -227,15 +229,16 @@ const EARLY_PILOT_PASSES: u32 = 2;
 const EARLY_MIN_GAIN: f64 = 1.1;
 
 /// The share of the unguided pilot's relative variance held by its 1% of pixels with the most
-/// (`Selection::unguided_tail_share`) from which the early look cannot tell: training goes on
-/// and the pilot after it decides. There a few rare bright paths make the error, which a
+/// (`Selection::unguided_tail_share`) from which the early look cannot stop training: training
+/// goes on and the pilot after it decides. There a few rare bright paths make the error, which a
 /// 4-spp pilot mostly misses, so its gains scatter by orders of magnitude from seed to seed;
 /// light-tailed images hold a few percent there, their pixels' own sampling noise. Going on
 /// wrongly costs at most the guided part of training's share; stopping wrongly has cost ten
 /// times the error and more (see docs/experiments.md).
 const EARLY_TAIL_LIMIT: f64 = 0.45;
 
-/// Whether the early look's pilot can be trusted: its unguided samples are not heavy-tailed.
+/// Whether the early look's pilot can be trusted to find no gain: its unguided samples are not
+/// heavy-tailed.
 fn trusted(early: &Selection) -> bool {
     early.unguided_tail_share < EARLY_TAIL_LIMIT
 }
@@ -535,6 +538,7 @@ mod tests {
             gain: validated_gain,
             everywhere_gain: validated_gain,
             validated_gain,
+            one_way_gains: [validated_gain; 2],
             stopped_training: false,
             early: None,
             decided_early: false,
@@ -542,15 +546,27 @@ mod tests {
         }
     }
 
-    /// The early look stops training, or settles the choice, only on a pilot whose unguided
-    /// error is not up to a few rare paths.
+    /// The early look stops training only on a pilot whose unguided error is not up to a few
+    /// rare paths.
     #[test]
-    fn a_heavy_tailed_early_look_neither_stops_training_nor_decides() {
+    fn a_heavy_tailed_early_look_does_not_stop_training() {
         assert!(stops_training(&early(0.9, 0.1)));
         assert!(!stops_training(&early(1.2, 0.1)));
         assert!(!stops_training(&early(0.5, 0.6)));
-        assert!(decisive(&early(2.5, 0.1)));
-        assert!(!decisive(&early(2.5, 0.6)));
-        assert!(!decisive(&Selection { guided_tiles: 3, ..early(2.5, 0.1) }));
+    }
+
+    /// The early look settles the choice only where each half of its pilot finds the requested
+    /// components worth it on every tile, heavy-tailed or not.
+    #[test]
+    fn the_early_look_decides_on_both_halves_of_its_pilot() {
+        assert!(decisive(&early(2.5, 0.1), Components::FULL));
+        assert!(decisive(&early(2.5, 0.9), Components::FULL));
+        // One half's firefly makes a large mean of a small gain.
+        let lopsided = Selection { one_way_gains: [30.0, 1.5], ..early(6.7, 0.9) };
+        assert!(!decisive(&lopsided, Components::FULL));
+        let roulette = Selection { components: "rr".into(), ..early(2.5, 0.1) };
+        assert!(!decisive(&roulette, Components::FULL));
+        assert!(decisive(&roulette, Components::ROULETTE));
+        assert!(!decisive(&Selection { guided_tiles: 3, ..early(2.5, 0.1) }, Components::FULL));
     }
 }

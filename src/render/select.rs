@@ -2,7 +2,9 @@
 //! 16x16 tile unguided and with each candidate (the requested components and, beside more,
 //! roulette alone), each from streams of its own; each candidate's best choice of tiles is
 //! the one with the highest efficiency `1 / (relative variance x cost)` of the image, and the
-//! candidate whose choice gains most wins.
+//! candidate whose choice gains most out of sample (judged on samples it was not made from)
+//! wins. Where no choice gains out of sample, every tile is guided with the requested
+//! components if that gains on all the pilot's samples, and none otherwise.
 //!
 //! Cost is the pilot's counted work (`Counters`) weighted by per-operation costs, not wall
 //! time, so the choice, and with it the image, depends on the seed alone, whatever the thread
@@ -69,9 +71,12 @@ pub struct Selection {
     pub everywhere_gain: f64,
     /// The gain out of sample: each half of the pilot's samples chooses tiles, the other half
     /// judges the choice (the geometric mean of both ways). Unlike `gain`, the noise a choice
-    /// was made from does not inflate it; it decides, and where it is not above 1 nothing is
-    /// guided.
+    /// was made from does not inflate it; it decides, and where no candidate's is above 1, every
+    /// tile is guided with the requested components if `everywhere_gain` is, and none if not.
     pub validated_gain: f64,
+    /// The two ways `validated_gain` is the geometric mean of: the choice made on the first
+    /// half of the pilot's samples judged on the second, and the other way round.
+    pub one_way_gains: [f64; 2],
     /// The share of the unguided pilot's relative variance held by its 1% of pixels with the
     /// most: a few percent for light tails, most of it where rare bright paths make the error.
     pub unguided_tail_share: f64,
@@ -189,33 +194,69 @@ pub(super) fn pilot(
         }
     };
     let columns = w.div_ceil(TILE) as usize;
-    // Each candidate's best set of tiles; the candidate whose set gains most out of sample
-    // wins (ties go to the earlier, the requested components).
-    let mut best: Option<Choice> = None;
-    let mut gains = Vec::with_capacity(strategies.len());
-    for (pilot, &components) in guided.iter().zip(&strategies) {
-        let parts = [0, 1].map(|i| measure(&pilot[i], &unguided[i], estimate, w, h));
-        let all: Vec<TileMeasure> = parts[0].iter().zip(&parts[1]).map(|(a, b)| *a + *b).collect();
-        let choice = decide(&all, columns);
-        let mut selection = summarise(&all, &choice, components, count);
-        selection.everywhere_gain = gain(&all, &vec![true; all.len()]);
-        selection.validated_gain = validated_gain(&parts, columns);
-        gains.push((components.name(), selection.validated_gain));
-        if best.as_ref().is_none_or(|b| selection.validated_gain > b.selection.validated_gain) {
-            best = Some(Choice { tiles: choice, components, selection });
-        }
-    }
-    let mut best = best.expect("at least the requested components");
+    let choices = guided
+        .iter()
+        .zip(&strategies)
+        .map(|(pilot, &components)| {
+            let parts = [0, 1].map(|i| measure(&pilot[i], &unguided[i], estimate, w, h));
+            judge(&parts, components, count, columns)
+        })
+        .collect();
+    let mut best = pick(choices);
     best.selection.unguided_tail_share = tail_share(&unguided, estimate);
-    let pays = best.selection.validated_gain > 1.0;
-    if !pays {
-        // No choice of tiles pays out of sample: the pilot cannot tell guiding from noise.
-        best.tiles.iter_mut().for_each(|g| *g = false);
-        (best.selection.guided_tiles, best.selection.gain) = (0, 1.0);
-    }
     best.selection.seconds = start.elapsed().as_secs_f64();
-    best.selection.candidates = gains;
     Some(best)
+}
+
+/// One candidate's choice of tiles from the two halves of its pilot (`columns` tiles per row),
+/// with its gains in sample, out of sample and guiding every tile.
+fn judge(
+    parts: &[Vec<TileMeasure>; 2],
+    components: Components,
+    pilot_spp: u32,
+    columns: usize,
+) -> Choice {
+    let all: Vec<TileMeasure> = parts[0].iter().zip(&parts[1]).map(|(a, b)| *a + *b).collect();
+    let tiles = decide(&all, columns);
+    let mut selection = summarise(&all, &tiles, components, pilot_spp);
+    selection.everywhere_gain = gain(&all, &vec![true; all.len()]);
+    selection.one_way_gains = one_way_gains(parts, columns);
+    selection.validated_gain = selection.one_way_gains.iter().product::<f64>().sqrt();
+    Choice { tiles, components, selection }
+}
+
+/// The candidate whose choice of tiles gains most out of sample (ties go to the earlier, the
+/// requested components, first in `choices`), if that gain is above 1; else
+/// [`no_choice_pays`].
+fn pick(mut choices: Vec<Choice>) -> Choice {
+    let gains: Vec<(String, f64)> =
+        choices.iter().map(|c| (c.components.name(), c.selection.validated_gain)).collect();
+    let winner = (1..choices.len()).fold(0, |b, k| {
+        let better = choices[k].selection.validated_gain > choices[b].selection.validated_gain;
+        if better { k } else { b }
+    });
+    let mut best = if choices[winner].selection.validated_gain > 1.0 {
+        choices.swap_remove(winner)
+    } else {
+        no_choice_pays(choices.swap_remove(0))
+    };
+    best.selection.candidates = gains;
+    best
+}
+
+/// What is guided when no candidate's choice of tiles pays out of sample: every tile with the
+/// `requested` components where that gains on all the pilot's samples, else none. Guiding
+/// every tile is not picked from the pilot's noise, so its gain needs no other half to judge
+/// it; where rare bright paths make the error, a half of the pilot that missed them shows
+/// guiding no gain at all, and the validated gain, which needs both halves, sent scenes that
+/// guiding renders several times better to unguided sampling (see docs/experiments.md).
+fn no_choice_pays(requested: Choice) -> Choice {
+    let Choice { mut tiles, components, mut selection } = requested;
+    let everywhere = selection.everywhere_gain > 1.0;
+    tiles.iter_mut().for_each(|g| *g = everywhere);
+    selection.guided_tiles = if everywhere { tiles.len() } else { 0 };
+    selection.gain = if everywhere { selection.everywhere_gain } else { 1.0 };
+    Choice { tiles, components, selection }
 }
 
 /// The share of the relative variance of `pilot`'s pixels (both halves pooled, each pixel
@@ -243,14 +284,14 @@ fn decide(measured: &[TileMeasure], columns: usize) -> Vec<bool> {
     everywhere_unless_clearly_worse(measured, choose(measured, &smoothed(measured, columns)))
 }
 
-/// The gain of [`decide`]'s choice out of sample: the choice made on each half of the pilot's
-/// samples, judged on the other, as the geometric mean of both ways. A choice judged on the
-/// samples it was made from looks better than it is (it picks the tiles whose samples happened
-/// to look better); judged on independent ones it does not.
-fn validated_gain(parts: &[Vec<TileMeasure>; 2], columns: usize) -> f64 {
+/// The gains of [`decide`]'s choice out of sample: the choice made on each half of the pilot's
+/// samples, judged on the other, both ways. A choice judged on the samples it was made from
+/// looks better than it is (it picks the tiles whose samples happened to look better); judged
+/// on independent ones it does not.
+fn one_way_gains(parts: &[Vec<TileMeasure>; 2], columns: usize) -> [f64; 2] {
     let one_way =
         |made: &[TileMeasure], judged: &[TileMeasure]| gain(judged, &decide(made, columns));
-    (one_way(&parts[0], &parts[1]) * one_way(&parts[1], &parts[0])).sqrt()
+    [one_way(&parts[0], &parts[1]), one_way(&parts[1], &parts[0])]
 }
 
 /// Each tile's measures from one half of the pilot: a guided strategy's film and per-tile
@@ -313,6 +354,7 @@ fn summarise(
         gain: gain(measured, choice),
         everywhere_gain: f64::NAN,
         validated_gain: f64::NAN,
+        one_way_gains: [f64::NAN; 2],
         stopped_training: false,
         early: None,
         decided_early: false,
@@ -529,12 +571,42 @@ mod tests {
         b[0] = tile(4.0, 1.0, 1.2); // half b: 4x worse
         let made_on_a = decide(&a, 12);
         assert!(made_on_a[0] && gain(&a, &made_on_a) > 1.1, "{made_on_a:?}");
-        let noise = validated_gain(&[a.clone(), b.clone()], 12);
-        assert!(noise < 1.0, "validated gain {noise}");
+        let [ab, ba] = one_way_gains(&[a.clone(), b.clone()], 12);
+        assert!((ab * ba).sqrt() < 1.0, "validated gains {ab} {ba}");
         // Both halves: guiding halves the variance everywhere at 1.2x the cost.
         let good = vec![tile(0.5, 1.0, 1.2); 12];
-        let real = validated_gain(&[good.clone(), good], 12);
-        assert!((real - 1.0 / 0.6).abs() < 1e-9, "validated gain {real}");
+        for real in one_way_gains(&[good.clone(), good], 12) {
+            assert!((real - 1.0 / 0.6).abs() < 1e-9, "validated gain {real}");
+        }
+    }
+
+    /// A heavy-tailed pilot: guiding halves the variance everywhere at 1.2x the cost, but one
+    /// half of the unguided samples missed the rare bright paths (its variance looks 0.4 of
+    /// guided's) while the other caught them (20x). No choice of tiles validates; guiding every
+    /// tile gains on all the samples, so every tile is guided, with the requested components
+    /// even where roulette alone validates no better.
+    #[test]
+    fn where_no_choice_validates_every_tile_is_guided_if_that_gains() {
+        let missed = vec![tile(1.0, 0.4, 1.2); 12];
+        let caught = vec![tile(1.0, 20.0, 1.2); 12];
+        let parts = [missed, caught];
+        let full = judge(&parts, Components::FULL, 8, 12);
+        assert!(full.selection.validated_gain < 1.0, "{}", full.selection.validated_gain);
+        let roulette = judge(&parts, Components::ROULETTE, 8, 12);
+        let chosen = pick(vec![full, roulette]);
+        assert_eq!(chosen.components, Components::FULL);
+        assert!(chosen.tiles.iter().all(|&g| g));
+        assert_eq!(chosen.selection.guided_tiles, 12);
+        assert!((chosen.selection.gain - 10.2 / 1.2).abs() < 1e-9, "{}", chosen.selection.gain);
+        // Where guiding every tile loses on all the samples too, nothing is guided.
+        let parts = [vec![tile(1.0, 0.4, 1.2); 12], vec![tile(1.0, 1.0, 1.2); 12]];
+        let chosen = pick(vec![judge(&parts, Components::FULL, 8, 12)]);
+        assert!(chosen.tiles.iter().all(|&g| !g));
+        assert_eq!((chosen.selection.guided_tiles, chosen.selection.gain), (0, 1.0));
+        // A choice that validates wins as before.
+        let good = vec![tile(0.5, 1.0, 1.2); 12];
+        let chosen = pick(vec![judge(&[good.clone(), good], Components::FULL, 8, 12)]);
+        assert_eq!(chosen.selection.guided_tiles, 12);
     }
 
     #[test]
