@@ -770,9 +770,18 @@ fn tell(
                 sel.validated_gain
             );
         } else if sel.decided_early {
+            let [a, b] = sel.one_way_gains;
             eprintln!(
-                "{name}: adaptive guiding guided every tile with {} (decided after 2 training passes: validated gain {:.2})",
-                sel.components, sel.validated_gain
+                "{name}: adaptive guiding guided every tile with {} (decided after 2 training \
+                 passes: each half of its pilot, judged by the other, gains {a:.2} and {b:.2})",
+                sel.components
+            );
+        } else if sel.guided_tiles > 0 && sel.validated_gain <= 1.0 {
+            eprintln!(
+                "{name}: adaptive guiding guided every tile with {} (no choice of tiles gained \
+                 on both halves of the pilot, validated gain {:.2}; guiding every tile gains \
+                 {:.2} on all its samples)",
+                sel.components, sel.validated_gain, sel.everywhere_gain
             );
         } else {
             eprintln!(
