@@ -189,8 +189,8 @@ pub const MIN_ADAPTIVE_SPP: u32 = 16;
 const DECISIVE_GAIN: f64 = 2.0;
 
 /// Whether the early look settles adaptive guiding's choice: its winner is the `requested`
-/// components, it guides every tile, and each half of its pilot, judged by the other, gains at
-/// least [`DECISIVE_GAIN`]. Both halves, not their geometric mean: where rare bright paths
+/// components, it guides every tile, and the choice made on each half of its pilot, judged on
+/// the other, gains at least [`DECISIVE_GAIN`]. Both halves, not their geometric mean: where rare bright paths
 /// make the error, one unguided firefly in one half can lift the mean past any bound, but not
 /// the half without it. Not roulette alone: it wins early on a young field and loses to full
 /// guiding once the field has trained (see docs/experiments.md).
@@ -243,7 +243,10 @@ fn trusted(early: &Selection) -> bool {
     early.unguided_tail_share < EARLY_TAIL_LIMIT
 }
 
-/// Whether the early look's `selection` stops training: a trusted pilot found no gain worth it.
+/// Whether the early look's `selection` stops training: a trusted pilot found no gain worth it
+/// out of sample. The validated gain alone, not guiding every tile on all the pilot's samples
+/// (`select::pilot`'s fallback): that answers a half of a heavy-tailed pilot missing the rare
+/// bright paths, and a trusted pilot is light-tailed, its halves alike.
 fn stops_training(selection: &Selection) -> bool {
     selection.validated_gain < EARLY_MIN_GAIN && trusted(selection)
 }
@@ -278,7 +281,8 @@ fn early_pilot(
     let films = std::mem::take(&mut training.films);
     let mut result = final_phase(scene, &options, None, films, threads, progress, Some(report));
     result.seconds += selection.seconds;
-    result.selection = Some(Selection { guided_tiles: 0, stopped_training: true, ..selection });
+    result.selection =
+        Some(Selection { guided_tiles: 0, gain: 1.0, stopped_training: true, ..selection });
     Some(result)
 }
 
@@ -555,8 +559,9 @@ mod tests {
         assert!(!stops_training(&early(0.5, 0.6)));
     }
 
-    /// The early look settles the choice only where each half of its pilot finds the requested
-    /// components worth it on every tile, heavy-tailed or not.
+    /// The early look settles the choice only where its pooled choice guides every tile with
+    /// the requested components and each half's choice, judged on the other, gains twice,
+    /// heavy-tailed or not.
     #[test]
     fn the_early_look_decides_on_both_halves_of_its_pilot() {
         assert!(decisive(&early(2.5, 0.1), Components::FULL));
