@@ -614,7 +614,7 @@ mod tests {
     fn the_candidate_whose_choice_validates_best_is_rendered() {
         let mut noisy = vec![tile(1.0, 1.0, 1.5); 12];
         noisy[..4].fill(tile(1.0, 50.0, 1.5));
-        let full = judge(&[noisy.clone(), noisy.clone()], Components::FULL, 8, 12);
+        let full = judge(&[noisy.clone(), noisy], Components::FULL, 8, 12);
         let mut cheap = vec![tile(1.0, 1.0, 1.1); 12];
         cheap[..4].fill(tile(1.0, 50.0, 1.1));
         let roulette = judge(&[cheap.clone(), cheap], Components::ROULETTE, 8, 12);
