@@ -182,7 +182,7 @@ pub fn render(
 pub const MIN_ADAPTIVE_SPP: u32 = 16;
 
 /// The gain, guiding every tile, from which the early look settles adaptive guiding's choice:
-/// the pilot after training is skipped and every tile guided with the early look's candidate.
+/// the pilot after training is skipped and every tile guided with the requested components.
 /// The field only improves with training, and where a field of 3 spp already halves the work
 /// of an image, the pilot (a tenth of the budget or more) could only confirm it. Twice, as much
 /// as a partial choice must gain over guiding everywhere (`select::PARTIAL_MARGIN`).
@@ -190,10 +190,10 @@ const DECISIVE_GAIN: f64 = 2.0;
 
 /// Whether the early look settles adaptive guiding's choice: its winner is the `requested`
 /// components, it guides every tile, and the choice made on each half of its pilot, judged on
-/// the other, gains at least [`DECISIVE_GAIN`]. Both halves, not their geometric mean: where rare bright paths
-/// make the error, one unguided firefly in one half can lift the mean past any bound, but not
-/// the half without it. Not roulette alone: it wins early on a young field and loses to full
-/// guiding once the field has trained (see docs/experiments.md).
+/// the other, gains at least [`DECISIVE_GAIN`]. Both halves, not their geometric mean: where
+/// rare bright paths make the error, one unguided firefly in one half can lift the mean past
+/// any bound, but not the half without it. Not roulette alone: it wins early on a young field
+/// and loses to full guiding once the field has trained (see docs/experiments.md).
 fn decisive(early: &Selection, requested: Components) -> bool {
     early.components == requested.name()
         && early.guided_tiles == early.tiles
