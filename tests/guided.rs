@@ -586,6 +586,8 @@ intensity = 15
 /// light keeps unguided next-event estimates (`1 / r^2` from a vertex at distance `r`) of
 /// finite variance, so that the unguided reference's standard error means something.
 const SPOT_FOG: &str = r#"
+medium = "fog"
+
 [camera]
 origin = [0, 1, 1.8]
 target = [0, 0.6, -1]
@@ -1294,4 +1296,55 @@ fn hard_cases_render_guided_as_unguided() {
             b.mean
         );
     }
+}
+
+/// Directions drawn at a point light's glow (`guided::halo`) carry small weights (the halo's
+/// density is large there) towards light that the fitted field does not see, so weight windows
+/// rouletted nearly all of them at the smallest survival, and the survivors' extra collisions
+/// near the light were the room's fireflies. The largest sample of every pixel is traced: the
+/// roulette of a halo direction must wait until the flight along it has found its light.
+#[test]
+fn directions_into_a_lights_glow_are_rouletted_after_their_flight() {
+    use zerovar::integrators::trace::{Strategy, TraceEvent};
+    let s = scene(SPOT_FOG);
+    let guiding = GuidingOptions {
+        components: Components::FULL,
+        train: TrainBudget::Passes(4),
+        ..GuidingOptions::default()
+    };
+    let options = RenderOptions {
+        budget: Budget::Samples(64),
+        seed: 3,
+        threads: None,
+        guiding,
+        fireflies: 120,
+    };
+    let report = render(&s, &options, &|_, _| true).unwrap().fireflies.expect("asked for");
+    let (mut halo_flights, mut rouletted_after) = (0, 0);
+    for sample in &report.samples {
+        // 0: no halo direction pending; 1: drawn, its flight to come; 2: flown.
+        let mut halo = 0;
+        for event in &sample.events {
+            match *event {
+                TraceEvent::Direction { strategy, .. } => {
+                    halo = u8::from(strategy == Strategy::Halo);
+                }
+                TraceEvent::Flight { .. } if halo == 1 => {
+                    halo = 2;
+                    halo_flights += 1;
+                }
+                TraceEvent::Continue { q, depth, .. } if halo == 1 => assert!(
+                    q >= 1.0,
+                    "pixel {:?}: rouletted at depth {depth} before the halo direction's flight (q {q})",
+                    sample.pixel
+                ),
+                TraceEvent::Continue { q, .. } if halo == 2 && q < 1.0 => rouletted_after += 1,
+                _ => {}
+            }
+        }
+    }
+    assert!(
+        halo_flights > 0 && rouletted_after > 0,
+        "{halo_flights} halo flights, {rouletted_after} rouletted after"
+    );
 }

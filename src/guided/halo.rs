@@ -64,20 +64,26 @@ impl Halo {
         let sum: f32 = self
             .axes
             .iter()
-            .map(|a| {
-                let c = w.dot(*a);
-                // atan2 of the sine and cosine keeps the angle accurate near the axis.
-                let s = w.cross(*a).length();
-                let theta = s.atan2(c);
-                if theta > CAP {
-                    0.0
-                } else {
-                    1.0 / (std::f32::consts::TAU * CAP * s.max(1e-6f32.sin()))
-                }
+            .map(|&a| match angle(w, a) {
+                (theta, _) if theta > CAP => 0.0,
+                (_, s) => 1.0 / (std::f32::consts::TAU * CAP * s.max(1e-6f32.sin())),
             })
             .sum();
         sum / self.axes.len() as f32
     }
+
+    /// Whether `w` lies in some light's cap, where its ray may pass close to the light and
+    /// bring back far more than a fitted mixture says.
+    pub fn covers(&self, w: Vec3A) -> bool {
+        self.axes.iter().any(|&a| angle(w, a).0 <= CAP)
+    }
+}
+
+/// The angle between unit vectors `w` and `a`, and its sine: atan2 of the sine and cosine
+/// keeps it accurate near the axis, where acos of a rounded cosine is not.
+fn angle(w: Vec3A, a: Vec3A) -> (f32, f32) {
+    let s = w.cross(a).length();
+    (s.atan2(w.dot(a)), s)
 }
 
 #[cfg(test)]

@@ -123,6 +123,9 @@ struct PathState {
     /// How far the next segment may reach: the camera's far clipping plane for the first,
     /// unbounded after it.
     reach: f32,
+    /// Roulette decided at the last vertex and taken after the flight (survival probability
+    /// and rule; see [`continue_path`]).
+    roulette: Option<(f32, Continuation)>,
 }
 
 /// Where a path starts: its first ray, how far that ray sees (a camera's far clipping plane,
@@ -177,7 +180,17 @@ pub fn radiance<C: RadianceCache>(
     let PathStart { ray, reach, medium } = start;
     let prev = Previous { position: ray.origin, pdf: 1.0, delta: true };
     let (beta, guided_gain) = (Spectrum::ONE, 1.0);
-    let state = PathState { ray, medium, beta, eta: 1.0, depth: 0, prev, guided_gain, reach };
+    let state = PathState {
+        ray,
+        medium,
+        beta,
+        eta: 1.0,
+        depth: 0,
+        prev,
+        guided_gain,
+        reach,
+        roulette: None,
+    };
     let mut branches = Branches { stack: ArrayVec::new(), walks: 1 };
     branches.stack.push(state);
     let mut l = Spectrum::ZERO;
@@ -227,7 +240,7 @@ fn walk<C: RadianceCache>(
         if let Some(m) = s.medium {
             match w.flight(&mut s, m, t_max, alpha) {
                 Flown::Scattered { t, delta_share } => {
-                    if !w.medium_vertex(&mut s, m, t, alpha, delta_share) {
+                    if !w.settle(&mut s) || !w.medium_vertex(&mut s, m, t, alpha, delta_share) {
                         break;
                     }
                     nulls = 0;
@@ -236,6 +249,9 @@ fn walk<C: RadianceCache>(
                 Flown::Passed => {}
                 Flown::Ended => break,
             }
+        }
+        if !w.settle(&mut s) {
+            break;
         }
         let Some(hit) = hit else {
             w.escape(&s);
@@ -464,7 +480,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         record_vertex(self.ctx, p, d.wi, d.pdf, s.beta, true, &direct);
         s.ray = Ray::new(p, d.wi);
         s.prev = Previous { position: p, pdf: d.pdf, delta: false };
-        self.go_on(s, loaded, d.wi)
+        self.go_on(s, loaded, &mix, d.wi)
     }
 
     /// A direction at a medium vertex from `mix` around the phase function (the weight is one
@@ -500,11 +516,21 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         }
     }
 
-    /// Roulette or splitting after the direction `wi` was chosen at a vertex (by the weight
-    /// window where the cache was `loaded` there). False when the path ends.
-    fn go_on(&mut self, s: &mut PathState, loaded: bool, wi: Vec3A) -> bool {
+    /// Roulette that waited for the flight into a light's glow (see [`continue_path`]); false
+    /// when the path ends.
+    fn settle(&mut self, s: &mut PathState) -> bool {
+        match s.roulette.take() {
+            Some((q, rule)) => survives(s, q, rule, self.ctx, self.sampler),
+            None => true,
+        }
+    }
+
+    /// Roulette or splitting after the direction `wi` was chosen from `mix` at a vertex (by the
+    /// weight window where the cache was `loaded` there). False when the path ends.
+    fn go_on(&mut self, s: &mut PathState, loaded: bool, mix: &Mixture, wi: Vec3A) -> bool {
         let adjoint = if self.window_rr && loaded { adjoint(self.ctx.cache, wi) } else { 0.0 };
-        continue_path(self.settings, s, adjoint, self.ctx, self.branches, self.sampler)
+        let glow = mix.in_glow(wi);
+        continue_path(self.settings, s, adjoint, glow, self.ctx, self.branches, self.sampler)
     }
 
     fn trace_direction(&mut self, depth: u32, surface: bool, loaded: bool, d: &DirectionSample) {
@@ -616,7 +642,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         s.medium = scene.medium_after(hit, d.wi, s.medium);
         s.ray = Ray::new(offset_origin(hit.p, hit.ng, d.wi), d.wi);
         s.prev = Previous { position: hit.p, pdf: d.pdf, delta: d.delta };
-        self.go_on(s, loaded, d.wi)
+        self.go_on(s, loaded, &mix, d.wi)
     }
 
     /// A direction at a surface from `mix` around the BSDF; `None` where the BSDF draws none.
@@ -732,6 +758,11 @@ impl Mixture {
         self.guided > 0.0 || self.halo.is_some()
     }
 
+    /// Whether `wi` heads into a light's glow (see [`continue_path`]).
+    fn in_glow(&self, wi: Vec3A) -> bool {
+        self.halo.as_ref().is_some_and(|h| h.covers(wi))
+    }
+
     fn halo_share(&self) -> f32 {
         if self.halo.is_some() { halo::SHARE } else { 0.0 }
     }
@@ -775,10 +806,18 @@ impl Mixture {
 /// Russian roulette (or splitting) after a direction was chosen; false when the path ends.
 /// With a usable `adjoint` and a pixel estimate, the weight window decides (and very deep
 /// paths meet the standard rule too); otherwise the standard rule from `rr_depth` on.
+///
+/// Roulette of a direction into a point light's `glow` waits until the flight along it has
+/// taken its extra collision ([`Walker::settle`]): the ray may pass the light closely, where
+/// the light it brings back grows as one over the distance, and neither the fitted adjoint nor
+/// the path weight (small there, as the halo's density is large) sees that. Rouletted before
+/// the flight, survivors carried that light at ten times its weight: fireflies of thousands of
+/// times the pixel's value.
 fn continue_path<C>(
     settings: &WalkSettings,
     s: &mut PathState,
     adjoint: f32,
+    glow: bool,
     ctx: &mut WalkContext<'_, C>,
     branches: &mut Branches,
     sampler: &mut Sampler,
@@ -787,6 +826,10 @@ fn continue_path<C>(
         && let Some(pixel) = ctx.pixel
     {
         let mut q = window::factor(luminance(s.beta), adjoint, pixel);
+        if glow && q < 1.0 {
+            s.roulette = Some((q, Continuation::Window));
+            return true;
+        }
         let room = branches.stack.remaining_capacity().min(MAX_WALKS - branches.walks + 1);
         if q > 1.0 && ctx.recorder.is_some() {
             q = 1.0; // training paths stay chains for the recorder
@@ -813,14 +856,28 @@ fn continue_path<C>(
         return true;
     }
     let q = (s.beta.max_element() * s.eta * s.eta).min(0.95);
+    if glow && q > 0.0 {
+        s.roulette = Some((q, Continuation::Standard));
+        return true;
+    }
+    survives(s, q, Continuation::Standard, ctx, sampler)
+}
+
+/// Roulette with survival probability `q` by `rule`: survivors are weighted by `1 / q`.
+fn survives<C>(
+    s: &mut PathState,
+    q: f32,
+    rule: Continuation,
+    ctx: &mut WalkContext<'_, C>,
+    sampler: &mut Sampler,
+) -> bool {
     let survives = !q.is_nan() && q > 0.0 && sampler.next_1d() < q;
     let (depth, copies) = (s.depth, u32::from(survives));
-    trace(ctx, || TraceEvent::Continue { depth, rule: Continuation::Standard, q, copies });
-    if !survives {
-        return false;
+    trace(ctx, || TraceEvent::Continue { depth, rule, q, copies });
+    if survives {
+        s.beta /= q;
     }
-    s.beta /= q;
-    true
+    survives
 }
 
 /// Writes `event()` down when the walk is traced.
