@@ -6,7 +6,9 @@
 //! pixels whose largest sample deviates most from the pixel's mean, weighted as relMSE weighs
 //! it (`1 / (mean^2 + epsilon)`), are replayed: a sample's streams are keyed by (seed, pixel,
 //! sample index), and the field and pixel estimates are fixed during the render phase, so the
-//! replay draws the same path again, this time with a trace attached.
+//! replay draws the same path again, this time with a trace attached. Training passes are
+//! searched the same way, each before the field learns from it (their images are averaged
+//! into the result, so their fireflies are the result's too).
 
 use super::{Pass, TILE, TileWork, camera_sample, with_tile_walk};
 use crate::film::Film;
@@ -18,6 +20,7 @@ use crate::math::{Spectrum, luminance};
 use crate::scene::Scene;
 use crate::stats::Counters;
 use serde::Serialize;
+use zerovar_guiding::PathRecorder;
 
 /// The largest samples of a render and their paths.
 #[derive(Clone, Debug, Serialize)]
@@ -28,6 +31,9 @@ pub struct FireflyReport {
     pub share: f64,
     /// The samples, largest share first.
     pub samples: Vec<Firefly>,
+    /// The training passes' largest samples, by their share of their own pass's image (where
+    /// the training images are averaged into the result), largest first.
+    pub training: Vec<Firefly>,
 }
 
 /// One sample and its path.
@@ -37,6 +43,8 @@ pub struct Firefly {
     pub pixel: [u32; 2],
     /// Its sample index.
     pub sample: u32,
+    /// The training pass that drew it (`None`: the render phase).
+    pub pass: Option<u32>,
     /// Its value.
     pub value: [f32; 3],
     /// The pixel's mean over the render phase.
@@ -68,10 +76,13 @@ impl TileWork for Replay<'_, '_> {
         let [x, y] = self.pixel;
         let w = self.scene.camera.resolution()[0];
         let mut trace = Trace::new();
+        // A recorded training path is never split: the replay records too, into nothing.
+        let mut recorder = PathRecorder::new();
+        let recorded = self.sample.wrapping_sub(self.pass.first) < self.pass.record;
         let mut ctx = WalkContext {
             cache,
             pixel: self.pass.estimate.map(|e| e[(y * w + x) as usize] + self.floor),
-            recorder: None,
+            recorder: recorded.then_some(&mut recorder),
             trace: Some(&mut trace),
         };
         let mut counters = Counters::default();
@@ -91,11 +102,17 @@ impl TileWork for Replay<'_, '_> {
 
 /// The `count` pixels whose largest sample holds the most of `film`'s relative squared
 /// deviation, each replayed with `pass` (whose estimate is the one the sample's own pass used,
-/// `estimate_for(sample)`).
+/// `estimate_for(sample)`); `training` is the training pass that drew `film`, if one did.
+/// Pixels are weighted by `1 / (m^2 + epsilon)` with `m` the pixel's mean in `judge` where
+/// given (a training pass's few samples per pixel make a poor judge of their own firefly: its
+/// pixel's mean rises with it), else in `film`.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn find<'p>(
     scene: &Scene,
     pass: Pass<'p>,
+    training: Option<u32>,
     film: &Film,
+    judge: Option<&[f32]>,
     largest: &[super::Largest],
     count: usize,
     estimate_for: impl Fn(u32) -> Option<&'p [f32]>,
@@ -105,7 +122,8 @@ pub(super) fn find<'p>(
     let mut ranked: Vec<(f64, usize)> = Vec::with_capacity(largest.len());
     for (i, (p, big)) in film.pixels().iter().zip(largest).enumerate() {
         let mean = f64::from(luminance(Spectrum::from_array(p.mean())));
-        let weight = 1.0 / (mean * mean + EPSILON);
+        let m = judge.map_or(mean, |j| f64::from(j[i]));
+        let weight = 1.0 / (m * m + EPSILON);
         // The sum of squared deviations of the pixel's samples from their mean.
         total += weight * (p.lum_sq - f64::from(p.count) * mean * mean).max(0.0);
         if big.index.is_some() {
@@ -131,6 +149,7 @@ pub(super) fn find<'p>(
             Firefly {
                 pixel: [x, y],
                 sample,
+                pass: training,
                 value: big.value.to_array(),
                 pixel_mean: film.pixels()[i].mean(),
                 share: if total > 0.0 { deviation / total } else { 0.0 },
@@ -140,7 +159,7 @@ pub(super) fn find<'p>(
             }
         })
         .collect();
-    FireflyReport { share: samples.iter().map(|f| f.share).sum(), samples }
+    FireflyReport { share: samples.iter().map(|f| f.share).sum(), samples, training: Vec::new() }
 }
 
 impl FireflyReport {
@@ -153,26 +172,39 @@ impl FireflyReport {
             self.samples.len(),
             100.0 * self.share
         );
-        s += "  share  pixel      sample  x mean   guided  largest light (depth, distance, weight)  weight built by\n";
-        for f in &self.samples {
-            let mean = luminance(Spectrum::from_array(f.pixel_mean));
-            let value = luminance(Spectrum::from_array(f.value));
-            let ratio = if mean > 0.0 { format!("{:.0}", value / mean) } else { "inf".into() };
-            s += &format!(
-                "  {:5.1}% ({:4},{:4}) {:7} {:>7}  {:6}  {:40} {}{}\n",
-                100.0 * f.share,
-                f.pixel[0],
-                f.pixel[1],
-                f.sample,
-                ratio,
-                if f.guided { "yes" } else { "no" },
-                largest_light(&f.events),
-                weight_makers(&f.events),
-                if f.replayed { "" } else { " (replay differs)" }
-            );
+        s += &table(&self.samples);
+        if !self.training.is_empty() {
+            s += "the training passes' largest samples (share of their own pass's image):\n";
+            s += &table(&self.training);
         }
         s
     }
+}
+
+/// One row per sample (see [`FireflyReport::summary`]); a training pass's samples name it.
+fn table(samples: &[Firefly]) -> String {
+    let mut s = String::from(
+        "  share  pixel      sample  x mean   guided  largest light (depth, distance, weight)  weight built by\n",
+    );
+    for f in samples {
+        let mean = luminance(Spectrum::from_array(f.pixel_mean));
+        let value = luminance(Spectrum::from_array(f.value));
+        let ratio = if mean > 0.0 { format!("{:.0}", value / mean) } else { "inf".into() };
+        s += &format!(
+            "  {:5.1}% ({:4},{:4}) {:7} {:>7}  {:6}  {:40} {}{}{}\n",
+            100.0 * f.share,
+            f.pixel[0],
+            f.pixel[1],
+            f.sample,
+            ratio,
+            if f.guided { "yes" } else { "no" },
+            largest_light(&f.events),
+            weight_makers(&f.events),
+            f.pass.map_or(String::new(), |p| format!(" (training pass {p})")),
+            if f.replayed { "" } else { " (replay differs)" }
+        );
+    }
+    s
 }
 
 /// The light event with the largest contribution, described.
@@ -344,5 +376,34 @@ intensity = 3
                 assert!(report.share > 0.0 && report.share < 1.0, "{}", report.share);
             }
         }
+    }
+
+    /// Training passes are searched too, each with the field it was drawn with: their samples
+    /// replay exactly (recorded ones as the recorded chains they were) and name their pass.
+    #[test]
+    fn training_passes_fireflies_are_found_and_replayed() {
+        let scene = crate::scene::load_str(std::path::Path::new("fog.toml"), FOG, &[])
+            .unwrap_or_else(|e| panic!("{e}"));
+        let mut options = RenderOptions::unguided(Budget::Samples(64), 5);
+        options.fireflies = 6;
+        options.guiding = GuidingOptions {
+            components: crate::guided::Components::FULL,
+            train: crate::render::TrainBudget::Passes(4),
+            ..GuidingOptions::default()
+        };
+        let result = render(&scene, &options, &|_, _| true).expect("renders");
+        let report = result.fireflies.expect("asked for");
+        assert_eq!(report.training.len(), 6);
+        let passes: std::collections::HashSet<u32> =
+            report.training.iter().filter_map(|f| f.pass).collect();
+        assert!(report.training.iter().all(|f| f.pass.is_some_and(|p| p < 4)));
+        assert!(passes.len() > 1, "samples of one pass only: {passes:?}");
+        for f in &report.training {
+            assert!(f.replayed, "{f:?}");
+            let value = luminance(Spectrum::from_array(f.value));
+            let traced = light_sum(&f.events);
+            assert!((traced - value).abs() <= 1e-4 * value.max(1e-6), "{traced} vs {value}");
+        }
+        assert!(report.samples.iter().all(|f| f.pass.is_none()));
     }
 }

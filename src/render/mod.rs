@@ -508,7 +508,20 @@ fn final_phase(
             let own = estimates.iter().rev().find(|(first, _)| *first <= sample);
             own.map(|(_, e)| &e[..]).or(guidance.as_ref().and_then(|g| g.estimate.as_deref()))
         };
-        fireflies::find(scene, pass(0, 0), &film, &largest, options.fireflies, estimate_for)
+        let mut found = fireflies::find(
+            scene,
+            pass(0, 0),
+            None,
+            &film,
+            None,
+            &largest,
+            options.fireflies,
+            estimate_for,
+        );
+        if combine {
+            found.training = report.as_ref().map_or_else(Vec::new, |r| r.fireflies.clone());
+        }
+        found
     });
     let image = if combine { combine_training(&training_films, &film) } else { film.image() };
     RenderResult {

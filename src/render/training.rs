@@ -57,6 +57,9 @@ pub struct TrainingReport {
     pub field: FieldStats,
     /// Why training stopped.
     pub stop: TrainingStop,
+    /// Each pass's largest samples, traced before the field learnt from the pass (when the
+    /// render looks for fireflies), largest share of its pass's image first.
+    pub fireflies: Vec<super::Firefly>,
 }
 
 /// `options` for the render phase after `training`: a time budget loses the seconds training
@@ -144,6 +147,8 @@ pub(super) struct Training {
     pub(super) next: u32,
     /// Adaptive guiding's early look, when it let training go on.
     pub(super) early: Option<super::Selection>,
+    /// The passes' largest samples (see [`TrainingReport::fireflies`]).
+    fireflies: Vec<super::Firefly>,
 }
 
 impl Training {
@@ -160,6 +165,7 @@ impl Training {
             stop: TrainingStop::Budget,
             next: 1,
             early: None,
+            fireflies: Vec::new(),
         })
     }
 
@@ -200,11 +206,26 @@ impl Training {
                 estimate: estimate.as_deref(),
                 record,
                 guided_tiles: None,
-                largest: false,
+                largest: options.fireflies > 0,
             };
             let Some(out) = render_pass(scene, spec, &mut film, progress, &|_| {}) else {
                 return Err(RenderError::Cancelled);
             };
+            if options.fireflies > 0 {
+                let found = super::fireflies::find(
+                    scene,
+                    spec,
+                    Some(pass),
+                    &film,
+                    estimate.as_deref(),
+                    &out.largest,
+                    options.fireflies,
+                    |_| estimate.as_deref(),
+                );
+                self.fireflies.extend(found.samples);
+                self.fireflies.sort_by(|a, b| b.share.total_cmp(&a.share));
+                self.fireflies.truncate(options.fireflies);
+            }
             self.field.update(&out.samples)?;
             self.direct = DirectFluence::build(&self.field, &out.records);
             self.samples += out.samples.len() as u64;
@@ -271,6 +292,7 @@ impl Training {
             samples: self.samples,
             field: self.field.stats(),
             stop: self.stop,
+            fireflies: self.fireflies.clone(),
         }
     }
 
@@ -325,6 +347,7 @@ mod tests {
             samples: 0,
             field: Field::new(FieldConfig::default()).expect("default field").stats(),
             stop: TrainingStop::Budget,
+            fireflies: Vec::new(),
         }
     }
 
