@@ -47,7 +47,7 @@ pub struct Firefly {
     pub pass: Option<u32>,
     /// Its value.
     pub value: [f32; 3],
-    /// The pixel's mean over the render phase.
+    /// The pixel's mean over its pass (the render phase, or its training pass).
     pub pixel_mean: [f32; 3],
     /// Its share of the image's relative squared deviation.
     pub share: f64,
