@@ -345,9 +345,10 @@ fn trains_a_field_and_renders_with_it() {
         (vec!["--guiding", "full", "--alpha", "1.5"], "--alpha 1.5: give a probability"),
         (vec!["--guiding", "full", "--alpha", "0.9"], "in [0, 0.8] (standard sampling keeps"),
         (
-            vec!["--guiding", "directions", "--alpha", "0", "--surface-alpha", "0"],
-            "nothing would be",
+            vec!["--guiding", "directions+rr", "--alpha", "0", "--surface-alpha", "0"],
+            "directions are guided at alpha 0 and surface-alpha 0, so none would be",
         ),
+        (vec!["--guiding", "distances", "--alpha", "0"], "distances are guided at alpha 0"),
         (vec!["--train-share", "0.2", "--train-passes", "3"], "cannot be used with"),
         (vec!["--guiding", "full", "--distance-alpha", "2"], "--distance-alpha 2"),
         (vec!["--guiding", "full", "--train-passes", "0"], "--train-passes 0"),

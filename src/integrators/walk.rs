@@ -49,8 +49,7 @@ const WINDOW_RR_DEPTH: u32 = 256;
 /// weight compounding without bound; with 20% no guided weight exceeds five standard ones.
 pub const MAX_ALPHA: f32 = 0.8;
 
-/// Without weight windows that may split (none do on recorded training paths), the largest
-/// factor by which a path's guided decisions may have
+/// Without weight windows, the largest factor by which a path's guided decisions may have
 /// multiplied its weight, relative to standard sampling, for it to go on guided. Each
 /// decision's factor is at most `1 / (1 - alpha)`, but along a deep path they compound (a
 /// dense cloud walks dozens of vertices) into rare, huge weights; past this the path samples
@@ -58,8 +57,7 @@ pub const MAX_ALPHA: f32 = 0.8;
 /// `MAX_GUIDED_GAIN / (1 - alpha)`. The switch depends on the path's past alone, which keeps
 /// every estimator unbiased. Weight windows split such paths instead (with them the bound
 /// only added error); without them it keeps guided directions in a dense cloud from doing far
-/// worse than unguided sampling, and a training path there from carrying weights in the
-/// thousands into the training images (see docs/experiments.md).
+/// worse than unguided sampling (see docs/experiments.md).
 pub const MAX_GUIDED_GAIN: f32 = 8.0;
 
 /// Settings of the walk.
@@ -224,9 +222,6 @@ fn walk<C: RadianceCache>(
     counters: &mut Counters,
 ) -> Spectrum {
     let window_rr = settings.guide.roulette && ctx.pixel.is_some();
-    // Recorded training paths are never split (`continue_path`), so windows cannot undo
-    // their compounding weights there.
-    let splits = window_rr && ctx.recorder.is_none();
     let mut w =
         Walker { settings, scene, ctx, branches, sampler, counters, l: Spectrum::ZERO, window_rr };
     let mut nulls = 0u32;
@@ -240,7 +235,7 @@ fn walk<C: RadianceCache>(
         // Guided decisions mix with standard sampling at `alpha`; without weight windows to
         // split heavy paths, only until they have compounded the path's weight past
         // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.
-        let guiding = splits || s.guided_gain < MAX_GUIDED_GAIN;
+        let guiding = window_rr || s.guided_gain < MAX_GUIDED_GAIN;
         let alpha = if guiding { settings.alpha.min(MAX_ALPHA) } else { 0.0 };
         if let Some(m) = s.medium {
             match w.flight(&mut s, m, t_max, alpha) {
@@ -837,11 +832,7 @@ fn continue_path<C>(
         }
         let room = branches.stack.remaining_capacity().min(MAX_WALKS - branches.walks + 1);
         if q > 1.0 && ctx.recorder.is_some() {
-            // Training paths stay chains for the recorder. One that should split goes on
-            // unguided instead: more guided factors would compound its weight, and the
-            // roulette that lifts light paths keeps `guided_gain` from seeing it.
-            q = 1.0;
-            s.guided_gain = s.guided_gain.max(MAX_GUIDED_GAIN);
+            q = 1.0; // training paths stay chains for the recorder
         }
         // Limiting q itself (not the rounded count) to the room left keeps E[n] / q = 1.
         q = q.min(room.max(1) as f32);

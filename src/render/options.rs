@@ -178,14 +178,13 @@ impl GuidingOptions {
         if !probability(self.distance_alpha) {
             return Err(OptionsError::DistanceAlpha(self.distance_alpha));
         }
+        // A decision asked for but left unguided by its share would be silence.
         let c = self.components;
-        if c.directions
-            && !c.distances
-            && !c.roulette
-            && self.alpha == 0.0
-            && self.surface_alpha == 0.0
-        {
+        if c.directions && self.alpha == 0.0 && self.surface_alpha == 0.0 {
             return Err(OptionsError::NothingGuided);
+        }
+        if c.distances && self.alpha == 0.0 {
+            return Err(OptionsError::DistancesUnguided);
         }
         match self.train {
             TrainBudget::Passes(n) if n == 0 || n > MAX_TRAIN_PASSES => {
@@ -252,11 +251,17 @@ pub enum OptionsError {
         "distance-alpha {0}: give a probability in [0, 0.8] (standard tracking keeps at least 20%, which bounds every guided weight)"
     )]
     DistanceAlpha(f32),
-    /// Directions alone are guided, at alpha 0 in media and at surfaces: nothing would be.
+    /// Directions are guided at alpha 0 in media and at surfaces: none would be.
     #[error(
-        "directions are guided at alpha 0 and surface-alpha 0, so nothing would be: give a positive alpha or surface-alpha, or guide something else"
+        "directions are guided at alpha 0 and surface-alpha 0, so none would be: give a positive alpha or surface-alpha, or leave directions out of --guiding"
     )]
     NothingGuided,
+    /// Distances are guided at alpha 0: guided flights take the media's share, so none would
+    /// be.
+    #[error(
+        "distances are guided at alpha 0, so none would be (guided flights, extra collisions included, come with the media's guided share): give a positive alpha, or leave distances out of --guiding"
+    )]
+    DistancesUnguided,
     /// A number of training passes outside 1..=[`MAX_TRAIN_PASSES`].
     #[error("train-passes {0}: give 1 to 20 (pass k renders 2^k spp)")]
     TrainPasses(u32),
