@@ -811,8 +811,8 @@ impl Mixture {
 /// taken its extra collision ([`Walker::settle`]): the ray may pass the light closely, where
 /// the light it brings back grows as one over the distance, and neither the fitted adjoint nor
 /// the path weight (small there, as the halo's density is large) sees that. Rouletted before
-/// the flight, survivors carried that light at ten times its weight: fireflies of thousands of
-/// times the pixel's value.
+/// the flight at the smallest survival, survivors carried that light at ten times its weight:
+/// the fog room's fireflies (see docs/experiments.md).
 fn continue_path<C>(
     settings: &WalkSettings,
     s: &mut PathState,
