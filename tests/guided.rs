@@ -1258,10 +1258,9 @@ radiance = 0.2
 "#;
 
 /// Quadrant means pooled over renders of seeds 32, 33, ..., with the larger of two variances:
-/// the renders' own (pooled) and the spread of their means. In the densest slab (sigma_t 1e5,
-/// walks of hundreds of vertices) a guided render's own standard error missed three quarters
-/// of its seed-to-seed spread (24 seeds x 1024 spp: 1.27% per render against 0.28%), which
-/// made a mean 1.3% low, about one seed-to-seed deviation, look like a 4.6-sigma bias.
+/// the renders' own (pooled) and the spread of their means. In the densest slab (walks of
+/// hundreds of vertices) a guided render's own standard error misses most of its
+/// seed-to-seed spread (see docs/experiments.md, 2026-12-03).
 fn over_seeds(seeds: u64, render: impl Fn(u64) -> Film) -> [Quadrant; 4] {
     let runs: Vec<[Quadrant; 4]> =
         (32..32 + seeds).map(|seed| quadrant_means(&render(seed))).collect();
