@@ -1061,6 +1061,41 @@ fn training_continuations_learn_the_light_found_by_later_next_event_estimates() 
     assert!(samples.iter().all(|x| x.pdf.is_finite() && x.pdf > 0.0));
 }
 
+#[test]
+fn split_training_paths_teach_every_vertex_the_light_it_receives() {
+    // In the infinite glow every vertex receives L = 3 from every direction. A cache that
+    // overestimates thirtyfold makes the windows split nearly every path; each vertex's
+    // training sample must still estimate 3, whether it lies before a split (its copies'
+    // light summed) or after one (its own copy's light alone). Batches of paths keep the
+    // samples of one path, which are correlated, in one estimate.
+    let s = infinite_glow(0.9);
+    let settings = half_guided(Components { directions: false, distances: false, roulette: true });
+    let mut cache = Analytic { scale: 30.0, ..Analytic::constant(3.0) };
+    let mut recorder = PathRecorder::new();
+    let mut counters = Counters::default();
+    let (mut batches, mut samples) = (MeanEstimate::default(), Vec::new());
+    for batch in 0..64u64 {
+        samples.clear();
+        for i in 0..1000 {
+            let mut ctx = WalkContext {
+                cache: &mut cache,
+                pixel: Some(3.0),
+                recorder: Some(&mut recorder),
+                trace: None,
+            };
+            let l = camera_sample(&settings, &s, &mut ctx, 5, batch * 1000 + i, &mut counters);
+            assert!(l.is_finite());
+            recorder.finish(&mut samples);
+        }
+        let total: f64 = samples.iter().map(|x| f64::from(x.radiance)).sum();
+        batches.push(total / samples.len() as f64);
+    }
+    let split = counters.walks as f64 / counters.paths as f64;
+    assert!(split > 4.0, "the windows split training paths only {split:.2}x");
+    batches.assert_matches(3.0, 4.5, "training samples of split paths");
+    assert!(batches.std_error() < 0.01, "too little power: {:?}", batches);
+}
+
 /// A directional cache that insists all light comes from a narrow cone about +z (uniform in the
 /// cone): guided directions then weigh 0.2 phase / (0.8 p_cone + 0.2 phase), about 5, whenever
 /// the standard branch picks a direction outside it.

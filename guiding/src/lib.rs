@@ -44,7 +44,7 @@ mod spatial;
 mod testutil;
 
 pub use config::{FieldConfig, SampleKind};
-pub use data::recorder::PathRecorder;
+pub use data::recorder::{Branch, PathRecorder};
 pub use data::sample::Sample;
 pub use directional::mixture::{MAX_LOBES, Mixture};
 pub use directional::vmf::VmfLobe;

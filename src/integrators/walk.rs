@@ -29,7 +29,7 @@ use crate::stats::Counters;
 use crate::tracking::{FlightEvent, sample_flight, transmittance_tracked};
 use arrayvec::ArrayVec;
 use glam::{Vec2, Vec3A};
-use zerovar_guiding::PathRecorder;
+use zerovar_guiding::{Branch, PathRecorder};
 
 /// A path crossing more null surfaces than this in a row is stuck in degenerate geometry.
 const MAX_NULL_CROSSINGS: u32 = 4096;
@@ -87,7 +87,7 @@ pub struct WalkContext<'a, C> {
     pub cache: &'a mut C,
     /// The pixel's estimated value (luminance), for weight windows; `None` before any.
     pub pixel: Option<f32>,
-    /// Records training samples when set (splitting is then off: a path stays a chain).
+    /// Records training samples when set (split copies as branches of the path's tree).
     pub recorder: Option<&'a mut PathRecorder>,
     /// Writes down every decision and every light found when set (the firefly diagnostic).
     pub trace: Option<&'a mut Trace>,
@@ -126,6 +126,8 @@ struct PathState {
     /// Roulette decided at the last vertex and taken after the flight (survival probability
     /// and rule; see [`continue_path`]).
     roulette: Option<(f32, Continuation)>,
+    /// Where a split copy goes on in the training recorder's tree.
+    branch: Branch,
 }
 
 /// Where a path starts: its first ray, how far that ray sees (a camera's far clipping plane,
@@ -190,6 +192,7 @@ pub fn radiance<C: RadianceCache>(
         guided_gain,
         reach,
         roulette: None,
+        branch: Branch::default(),
     };
     let mut branches = Branches { stack: ArrayVec::new(), walks: 1 };
     branches.stack.push(state);
@@ -203,6 +206,9 @@ pub fn radiance<C: RadianceCache>(
             depth: state.depth,
         });
         index += 1;
+        if let Some(r) = ctx.recorder.as_deref_mut() {
+            r.resume(state.branch);
+        }
         l += walk(settings, scene, state, ctx, &mut branches, sampler, counters);
     }
     l
@@ -831,9 +837,6 @@ fn continue_path<C>(
             return true;
         }
         let room = branches.stack.remaining_capacity().min(MAX_WALKS - branches.walks + 1);
-        if q > 1.0 && ctx.recorder.is_some() {
-            q = 1.0; // training paths stay chains for the recorder
-        }
         // Limiting q itself (not the rounded count) to the room left keeps E[n] / q = 1.
         q = q.min(room.max(1) as f32);
         let n = window::copies(q, sampler.next_1d());
@@ -843,6 +846,9 @@ fn continue_path<C>(
             return false;
         }
         s.beta /= q;
+        if let Some(r) = ctx.recorder.as_deref() {
+            s.branch = r.branch();
+        }
         for _ in 1..n {
             branches.stack.push(*s);
             branches.walks += 1;

@@ -20,7 +20,6 @@ use crate::math::{Spectrum, luminance};
 use crate::scene::Scene;
 use crate::stats::Counters;
 use serde::Serialize;
-use zerovar_guiding::PathRecorder;
 
 /// The largest samples of a render and their paths.
 #[derive(Clone, Debug, Serialize)]
@@ -76,13 +75,11 @@ impl TileWork for Replay<'_, '_> {
         let [x, y] = self.pixel;
         let w = self.scene.camera.resolution()[0];
         let mut trace = Trace::new();
-        // A recorded training path is never split: the replay records too, into nothing.
-        let mut recorder = PathRecorder::new();
-        let recorded = self.sample.wrapping_sub(self.pass.first) < self.pass.record;
+        // Recording a training path does not change its decisions: the replay needs none.
         let mut ctx = WalkContext {
             cache,
             pixel: self.pass.estimate.map(|e| e[(y * w + x) as usize] + self.floor),
-            recorder: recorded.then_some(&mut recorder),
+            recorder: None,
             trace: Some(&mut trace),
         };
         let mut counters = Counters::default();
@@ -379,7 +376,7 @@ intensity = 3
     }
 
     /// Training passes are searched too, each with the field it was drawn with: their samples
-    /// replay exactly (recorded ones as the recorded chains they were) and name their pass.
+    /// replay exactly (recorded ones too) and name their pass.
     #[test]
     fn training_passes_fireflies_are_found_and_replayed() {
         let scene = crate::scene::load_str(std::path::Path::new("fog.toml"), FOG, &[])

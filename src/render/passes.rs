@@ -27,8 +27,8 @@ pub(super) struct Pass<'a> {
     pub(super) field: Option<(&'a Field, Option<&'a DirectFluence>)>,
     /// Per-pixel estimates for weight windows (`window::floor` is added when rendering).
     pub(super) estimate: Option<&'a [f32]>,
-    /// Samples per pixel, the pass's first, whose paths are recorded as training samples
-    /// (splitting is then off); 0 records none.
+    /// Samples per pixel, the pass's first, whose paths are recorded as training samples;
+    /// 0 records none.
     pub(super) record: u32,
     /// Per tile, whether it is guided; `None` guides every tile as `settings` say.
     pub(super) guided_tiles: Option<&'a [bool]>,

@@ -25,6 +25,12 @@
 //! emission found by the continuation, or NEE alone counting direct light), so scaling keeps
 //! the mean weight per sample, which the field uses as its fluence, unbiased.
 //!
+//! **Split paths.** A renderer that splits a path (weight windows) records it as a tree:
+//! before tracing a copy it calls `resume(branch)` with the [`Branch`] that `branch()`
+//! returned where the copy was made. Contributions then propagate to the copy's own
+//! ancestors only; a vertex before the split sums what all its copies bring back, each
+//! contribution already carrying its copy's `1 / q`, so it still learns an unbiased estimate.
+//!
 //! Samples with a zero pdf (delta directions, terminated paths) are skipped. The recorder
 //! keeps its buffers between paths, so after warm-up it does not allocate.
 
@@ -40,6 +46,8 @@ struct Vertex {
     volume: bool,
     radiance: f64,
     direct_samples: u32,
+    /// The vertex this one's path came from; `None` for the first.
+    parent: Option<usize>,
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -52,11 +60,17 @@ struct Direct {
     volume: bool,
 }
 
+/// Where a split copy of a path goes on from: the last vertex recorded before the split.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Branch(Option<usize>);
+
 /// Records one path at a time and emits its training samples (see the module docs).
 #[derive(Clone, Debug, Default)]
 pub struct PathRecorder {
     vertices: Vec<Vertex>,
     direct: Vec<Direct>,
+    /// The last vertex of the branch being recorded.
+    cursor: Option<usize>,
 }
 
 impl PathRecorder {
@@ -69,6 +83,19 @@ impl PathRecorder {
     pub fn clear(&mut self) {
         self.vertices.clear();
         self.direct.clear();
+        self.cursor = None;
+    }
+
+    /// The branch being recorded, for a split copy to [`resume`](Self::resume) from.
+    pub fn branch(&self) -> Branch {
+        Branch(self.cursor)
+    }
+
+    /// Goes on recording after `branch`'s last vertex: the next vertex is its child, and
+    /// contributions reach that vertex and its ancestors only. A branch from before the last
+    /// `clear` or `finish` starts a new path.
+    pub fn resume(&mut self, branch: Branch) {
+        self.cursor = branch.0.filter(|&i| i < self.vertices.len());
     }
 
     /// Number of vertices recorded for the current path.
@@ -93,31 +120,42 @@ impl PathRecorder {
             volume,
             radiance: 0.0,
             direct_samples: 0,
+            parent: self.cursor,
         });
+        self.cursor = Some(self.vertices.len() - 1);
+    }
+
+    /// Adds `radiance(beta)` to the last vertex and each of its ancestors, `beta` being that
+    /// vertex's throughput.
+    fn propagate(&mut self, radiance: impl Fn(f64) -> f64) {
+        let mut at = self.cursor;
+        while let Some(i) = at {
+            let v = &mut self.vertices[i];
+            let beta = f64::from(v.throughput);
+            if beta > 0.0 && beta.is_finite() {
+                v.radiance += radiance(beta);
+            }
+            at = v.parent;
+        }
     }
 
     /// Adds radiance arriving at the last vertex along its sampled direction, and propagates
-    /// it to every earlier vertex divided by the throughput between them.
+    /// it to every earlier vertex of its branch divided by the throughput between them.
     pub fn add_contribution(&mut self, radiance: f32) {
-        let Some(last) = self.vertices.last() else { return };
-        let beta_last = f64::from(last.throughput);
+        let Some(last) = self.cursor else { return };
+        let beta_last = f64::from(self.vertices[last].throughput);
         let radiance = f64::from(radiance);
         if !(radiance.is_finite() && radiance > 0.0 && beta_last.is_finite()) {
             return;
         }
-        for v in &mut self.vertices {
-            let beta = f64::from(v.throughput);
-            if beta > 0.0 && beta.is_finite() {
-                v.radiance += radiance * beta_last / beta;
-            }
-        }
+        self.propagate(|beta| radiance * beta_last / beta);
     }
 
     /// Adds a pixel contribution `throughput * radiance` found after the last vertex, as the
     /// renderer adds it to its film: the same as `add_contribution(contribution / beta_N)`.
     pub fn add_weighted_contribution(&mut self, contribution: f32) {
-        let Some(last) = self.vertices.last() else { return };
-        let beta_last = f64::from(last.throughput);
+        let Some(last) = self.cursor else { return };
+        let beta_last = f64::from(self.vertices[last].throughput);
         if beta_last.is_nan() || beta_last <= 0.0 {
             return;
         }
@@ -125,12 +163,7 @@ impl PathRecorder {
         if !(contribution.is_finite() && contribution > 0.0) {
             return;
         }
-        for v in &mut self.vertices {
-            let beta = f64::from(v.throughput);
-            if beta > 0.0 && beta.is_finite() {
-                v.radiance += contribution / beta;
-            }
-        }
+        self.propagate(|beta| contribution / beta);
     }
 
     /// Records a next-event-estimation sample at `pos` (normally the last vertex): light
@@ -143,7 +176,7 @@ impl PathRecorder {
         radiance: f32,
         volume: bool,
     ) {
-        let vertex = self.vertices.len().checked_sub(1);
+        let vertex = self.cursor;
         if let Some(v) = vertex
             && pdf > 0.0
         {
@@ -154,17 +187,15 @@ impl PathRecorder {
 
     /// Appends the path's training samples to `out` and clears the recorder.
     pub fn finish(&mut self, out: &mut Vec<Sample>) {
-        let n = self.vertices.len();
         let emitted = |v: &Vertex| u32::from(v.pdf > 0.0) + v.direct_samples;
         for (j, v) in self.vertices.iter().enumerate() {
             if !(v.pdf > 0.0 && v.pdf.is_finite()) {
                 continue;
             }
-            let distance = if j + 1 < n {
-                (self.vertices[j + 1].position - v.position).length()
-            } else {
-                f32::INFINITY
-            };
+            // The distance to the next vertex along the sampled direction: its first child's
+            // (children follow their parent, so the search starts after it).
+            let child = self.vertices[j + 1..].iter().find(|c| c.parent == Some(j));
+            let distance = child.map_or(f32::INFINITY, |c| (c.position - v.position).length());
             let radiance = (v.radiance * f64::from(emitted(v))).min(f64::from(f32::MAX)) as f32;
             out.push(Sample {
                 position: v.position,
@@ -243,5 +274,38 @@ mod tests {
         for s in &out {
             s.validate().unwrap();
         }
+    }
+
+    #[test]
+    fn split_copies_reach_their_own_ancestors_only() {
+        // Vertex 0 (throughput 1), then a split in two copies weighted 1/2 each: copy A
+        // records vertex 1 (throughput 0.25) and finds a contribution 0.5; copy B records
+        // vertex 2 (throughput 0.5) and finds 0.1.
+        let mut r = PathRecorder::new();
+        r.add_vertex(Vec3::ZERO, Vec3::X, 1.0, 1.0, true);
+        let split = r.branch();
+        r.add_vertex(Vec3::X, Vec3::Y, 1.0, 0.25, true);
+        r.add_weighted_contribution(0.5);
+        r.resume(split);
+        r.add_vertex(Vec3::new(3.0, 0.0, 0.0), Vec3::Z, 1.0, 0.5, true);
+        r.add_weighted_contribution(0.1);
+        let mut out = Vec::new();
+        r.finish(&mut out);
+        let radiance: Vec<f32> = out.iter().map(|s| s.radiance).collect();
+        let expect = [0.5 + 0.1, 0.5 / 0.25, 0.1 / 0.5];
+        for (got, e) in radiance.iter().zip(expect) {
+            assert!((got - e).abs() < 1e-6, "{radiance:?} vs {expect:?}");
+        }
+        // Vertex 0's distance is to its first child; each copy's last vertex looks to infinity.
+        assert!((out[0].distance - 1.0).abs() < 1e-6);
+        assert_eq!((out[1].distance, out[2].distance), (f32::INFINITY, f32::INFINITY));
+        // A branch kept from a finished path starts the next path afresh.
+        r.resume(split);
+        r.add_vertex(Vec3::ZERO, Vec3::X, 1.0, 2.0, true);
+        r.add_weighted_contribution(1.0);
+        out.clear();
+        r.finish(&mut out);
+        assert_eq!(out.len(), 1);
+        assert!((out[0].radiance - 0.5).abs() < 1e-6);
     }
 }
