@@ -226,7 +226,8 @@ def summary_table(title, names, out, mitsuba, trim):
                 if integrator == "volpathmis" and not s.chromatic:
                     m3.append((None, "-"))
                 elif not mi.runs:
-                    m3.append((None, "failed" if mi.ran else "not run"))
+                    twinless = "no Mitsuba 3 twin" in (mi.why_missing() or "")
+                    m3.append((None, "no twin" if twinless else "failed" if mi.ran else "not run"))
                 elif not mi.comparable:
                     m3.append((None, f"{rust_e(mi.median(s.excess))} ({mi.label()})"))
                 else:
