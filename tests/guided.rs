@@ -86,8 +86,13 @@ impl RadianceCache for Analytic {
 }
 
 /// The scenes every guided estimator must converge on.
-const SCENES: [(&str, &str); 4] =
-    [("chromatic", CHROMATIC), ("fog", FOG), ("spot in fog", SPOT_FOG), ("cloud", CLOUD)];
+const SCENES: [(&str, &str); 5] = [
+    ("chromatic", CHROMATIC),
+    ("fog", FOG),
+    ("spot in fog", SPOT_FOG),
+    ("spot in haze", SPOT_HAZE),
+    ("cloud", CLOUD),
+];
 
 fn medium_of(text: &str) -> Medium {
     let s = scene(&format!(
@@ -320,6 +325,89 @@ fn guided_flights_weigh_both_collisions_by_their_densities() {
             edges.dedup();
         }
         chi2_1d(&extra, &direct_pdf, &edges, &[]).assert_pass(1e-3, &what);
+    }
+}
+
+/// In a heterogeneous medium guided flights take extra collisions towards point and spot
+/// lights too. Together with the flight's own collision (at its share `delta_share`) they
+/// estimate the light scattered into the ray, here `f(t)`: a point light's `1 / r^2`, inside a
+/// spot light's cone only. Their sum must match quadrature of `T(t) sigma_s(t) f(t)` to a
+/// quarter of a percent, at distance alpha 0 and 0.5, whatever stand-in weighs them.
+#[test]
+fn heterogeneous_flights_share_point_lights_between_both_collisions_without_bias() {
+    let medium = medium_of(
+        "type = \"noise\"\nscale = 1\nalbedo = [0.9, 0.7, 0.5]\nnoise = { sharpness = 0.5, threshold = -0.5 }\ntransform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 4 }]",
+    );
+    // The ray enters the box at t = 1; a surface at t = 4 ends it inside.
+    let ray = Ray::new(Vec3A::new(-3.0, 0.1, 0.2), Vec3A::X);
+    let t_max = 4.0;
+    let spot = (-Vec3A::Y, 25f32.to_radians().cos());
+    let lights = [
+        point(Vec3A::new(0.0, 0.4, 0.2)),
+        zerovar::lights::PointLight { position: Vec3A::new(-0.5, 1.5, 0.2), cone: Some(spot) },
+    ];
+    for (light, alpha) in lights.iter().flat_map(|l| [(l, 0.0f32), (l, 0.5)]) {
+        let what = format!("{light:?}, alpha {alpha}");
+        let f = |t: f32| {
+            let to = ray.at(t) - light.position;
+            let inside = light.cone.is_none_or(|(axis, cos)| to.dot(axis) >= to.length() * cos);
+            if inside { 1.0 / to.length_squared() } else { 0.0 }
+        };
+        // Midpoint quadrature, the optical depth accumulated alongside.
+        let n = 200_000;
+        let h = f64::from(t_max) / n as f64;
+        let (mut depth, mut expected) = (0.0f64, [0.0f64; 3]);
+        for i in 0..n {
+            let t = ((i as f64 + 0.5) * h) as f32;
+            let c = medium.coefficients(ray.at(t));
+            let sigma_t = f64::from(c.sigma_t.x);
+            let transmittance = (-(depth + 0.5 * sigma_t * h)).exp();
+            depth += sigma_t * h;
+            for (e, a) in expected.iter_mut().zip(c.albedo.to_array()) {
+                *e += transmittance * sigma_t * f64::from(a) * f64::from(f(t)) * h;
+            }
+        }
+        let mut cache = Analytic::constant(1.0);
+        let mut sampler = Sampler::new(21, 0, 0);
+        let counters = &mut Counters::default();
+        let (mut red, mut blue) = (MeanEstimate::default(), MeanEstimate::default());
+        let (mut extras, mut shared) = (0, 0);
+        let flights = 400_000;
+        for _ in 0..flights {
+            let flight = zerovar::guided::distance::guided_flight(
+                &medium,
+                &ray,
+                t_max,
+                Spectrum::ONE,
+                alpha,
+                Some(std::slice::from_ref(light)),
+                &mut cache,
+                &mut sampler,
+                counters,
+            );
+            let mut sum = Spectrum::ZERO;
+            if let GuidedEvent::Scatter { t } = flight.event {
+                sum += flight.weight * flight.delta_share * f(t);
+                shared += usize::from(flight.delta_share < 1.0);
+            }
+            if let Some(e) = flight.extra {
+                sum += e.weight * f(e.t);
+                extras += 1;
+            }
+            assert!(sum.is_finite(), "{what}: {flight:?}");
+            red.push(f64::from(sum.x));
+            blue.push(f64::from(sum.z));
+        }
+        assert!(
+            extras > flights * 9 / 10 && shared > 1000,
+            "{what}: {extras} extra, {shared} shared"
+        );
+        for (estimate, expected, channel) in
+            [(red, expected[0], "red"), (blue, expected[2], "blue")]
+        {
+            assert!(estimate.std_error() < 0.0025 * expected, "{what}, {channel}: {estimate:?}");
+            estimate.assert_matches(expected, 4.5, &format!("{what}, {channel}"));
+        }
     }
 }
 
@@ -613,6 +701,48 @@ center = [0.3, 1.8, -0.6]
 radius = 0.15
 bsdf = { type = "null" }
 exterior = "fog"
+
+[[lights]]
+type = "spot"
+position = [0.3, 1.8, -0.6]
+target = [0, 0, -1]
+intensity = 4
+cutoff_angle = 25
+"#;
+
+/// `SPOT_FOG` in heterogeneous haze (a noise density varying about fivefold over the room):
+/// guided flights there take their extra collisions towards the spot light in the
+/// null-collision form.
+const SPOT_HAZE: &str = r#"
+medium = "haze"
+
+[camera]
+origin = [0, 1, 1.8]
+target = [0, 0.6, -1]
+fov = 60
+resolution = [12, 10]
+medium = "haze"
+
+[media.haze]
+type = "noise"
+scale = 0.8
+albedo = 0.9
+phase = { type = "hg", g = 0.3 }
+noise = { frequency = 3, octaves = 2, seed = 3, amplitude = 0.8, threshold = -1.2, sharpness = 0.5 }
+transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = [3, 2, 4] }, { translate = [0, 1, 0] }]
+
+[[shapes]]
+type = "cube"
+transform = [{ scale = [1.5, 1, 2] }, { translate = [0, 1, 0] }]
+flip_normals = true
+bsdf = { type = "diffuse", reflectance = [0.6, 0.5, 0.4] }
+
+[[shapes]]
+type = "sphere"
+center = [0.3, 1.8, -0.6]
+radius = 0.15
+bsdf = { type = "null" }
+exterior = "haze"
 
 [[lights]]
 type = "spot"

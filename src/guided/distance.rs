@@ -33,7 +33,7 @@ use crate::math::{Ray, Spectrum, is_grey, luminance, positive};
 use crate::media::{Medium, MediumKind};
 use crate::rng::Sampler;
 use crate::stats::Counters;
-use crate::tracking::{MediumRay, TrackedRay, transmittance_homogeneous};
+use crate::tracking::{MediumRay, TrackedRay, ratio_tracking, transmittance_homogeneous};
 
 /// Equal segments of the guided stretch in guided flights: one, so a flight costs one cache
 /// lookup. Finer segments follow the in-scattered light along the ray more closely, but the
@@ -465,8 +465,8 @@ impl GuidedDistance {
 
 /// A guided free flight along `ray` within `(0, t_max)` in `medium`, for throughput `beta`.
 ///
-/// With `extra_nee` (the scene's point and spot lights), a homogeneous,
-/// non-emissive medium also returns an [`ExtraCollision`], placed by the cache's estimate of
+/// With `extra_nee` (the scene's point and spot lights), a non-emissive medium also returns
+/// an [`ExtraCollision`]. In a homogeneous one it is placed by the cache's estimate of
 /// the light delta lights (the sun, point lights) scatter into the ray
 /// (`RadianceCache::direct`, in 16 parts of the guided stretch), mixed with the equiangular
 /// density towards the point lights ([`GuidedDistance::aim_at`]), and gives the
@@ -477,7 +477,8 @@ impl GuidedDistance {
 /// of `1 / alpha - 1` (the standard half finds a shaft of sunlight only by chance). The extra
 /// collision lowers the error at equal time (see docs/experiments.md). Other lights stay with
 /// the flight's own collision: their estimates are MIS-weighted against direction sampling,
-/// whose guided density an extra collision would have to load.
+/// whose guided density an extra collision would have to load. In a heterogeneous medium the
+/// extra collision aims at point and spot lights alone (`NullCollisionExtra`).
 ///
 /// At `alpha` 0 in a grey, non-emissive homogeneous medium the flight takes the closed form of
 /// `plain_flight`: the same densities from a quarter of the transcendental functions, so less
@@ -506,9 +507,18 @@ pub fn guided_flight(
     let lookup_u = sampler.next_1d();
     if let MediumKind::Heterogeneous(_) = &medium.kind {
         let Some(r) = MediumRay::new(medium, ray, t_max) else { return pass };
-        return null_collision_flight(
-            medium, &r, ray, beta, alpha, lookup_u, cache, sampler, counters,
-        );
+        let extra = extra_nee
+            .filter(|_| !medium.is_emissive())
+            .and_then(|points| NullCollisionExtra::new(&r, ray, points));
+        let mut f =
+            null_collision_flight(medium, &r, ray, beta, alpha, lookup_u, cache, sampler, counters);
+        if let Some(x) = extra {
+            if let GuidedEvent::Scatter { t } = f.event {
+                f.delta_share = x.own_share(&r, t, counters);
+            }
+            f.extra = x.sample(medium, &r, ray, sampler, counters);
+        }
+        return f;
     }
     if let MediumKind::Homogeneous { sigma_t, .. } = medium.kind
         && sigma_t.min_element() <= 0.0
@@ -599,6 +609,76 @@ fn extra_collision(
         Spectrum::ZERO
     };
     Some(ExtraCollision { t, weight })
+}
+
+/// Extra collisions for point and spot lights in a heterogeneous medium: equiangular over the
+/// ray's part inside the medium's box, weighted by a ratio-tracking estimate of the
+/// transmittance to them. The flight's own collision has no density in closed form here, so
+/// the power heuristic weighs the equiangular density against a stand-in for it, the same at
+/// both collisions: any pair of weights that sums to one at every point keeps the two
+/// estimates of the lights' in-scattering unbiased together, and a stand-in only decides how
+/// well they share it.
+struct NullCollisionExtra {
+    towards: Equiangular,
+}
+
+impl NullCollisionExtra {
+    fn new(r: &MediumRay<'_>, ray: &Ray, points: &[PointLight]) -> Option<Self> {
+        let (t0, t1) = r.range();
+        Equiangular::between(ray, t0, t1, points).map(|towards| Self { towards })
+    }
+
+    /// The stand-in for the flight's own collision density at `t`, given the extinction
+    /// there: the collision density of delta tracking if the majorants were the extinction
+    /// up to `t`.
+    fn own_density(r: &MediumRay<'_>, t: f32, sigma_t: f32) -> f32 {
+        let mut depth = 0.0;
+        for span in r.segments() {
+            if span.t0 >= t {
+                break;
+            }
+            depth += span.majorant.max_element() * (span.t1.min(t) - span.t0);
+        }
+        // Where it underflows, the power heuristic gives the point to the extra collision.
+        sigma_t * (-depth).exp()
+    }
+
+    /// The share of next-event estimation of delta lights at the flight's own collision at `t`.
+    fn own_share(&self, r: &MediumRay<'_>, t: f32, counters: &mut Counters) -> f32 {
+        let towards = self.towards.pdf(t);
+        if towards <= 0.0 {
+            return 1.0;
+        }
+        counters.density_lookups += 1;
+        let own = Self::own_density(r, t, luminance(r.coefficients(t).sigma_t));
+        power_heuristic(own, towards)
+    }
+
+    /// The extra collision: its point, and the transmittance to it times the scattering
+    /// coefficient there over its density, times its share.
+    fn sample(
+        &self,
+        medium: &Medium,
+        r: &MediumRay<'_>,
+        ray: &Ray,
+        sampler: &mut Sampler,
+        counters: &mut Counters,
+    ) -> Option<ExtraCollision> {
+        let (_, t1) = r.range();
+        let t = self.towards.sample(sampler.next_1d(), sampler.next_1d(), t1);
+        let density = self.towards.pdf(t);
+        if !positive(density) {
+            return None;
+        }
+        counters.density_lookups += 1;
+        let c = r.coefficients(t);
+        let own = Self::own_density(r, t, luminance(c.sigma_t));
+        let transmittance = MediumRay::new(medium, ray, t)
+            .map_or(Spectrum::ONE, |part| ratio_tracking(&part, sampler, counters));
+        let weight =
+            transmittance * c.sigma_t * c.albedo * (power_heuristic(density, own) / density);
+        Some(ExtraCollision { t, weight })
+    }
 }
 
 /// A real collision at `t` in an emissive homogeneous medium, reached by a path of throughput

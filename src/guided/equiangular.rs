@@ -40,12 +40,26 @@ impl Equiangular {
     /// [`MAX_POINT_LIGHTS`]), each over the part of it the light reaches; `None` without
     /// lights or without a stretch any reaches.
     pub(super) fn new(ray: &Ray, end: f32, point_lights: &[PointLight]) -> Option<Self> {
-        if end.is_nan() || end <= 0.0 {
+        Self::between(ray, 0.0, end, point_lights)
+    }
+
+    /// The same over `(begin, end)`: the part of a ray inside a medium's box.
+    pub(super) fn between(
+        ray: &Ray,
+        begin: f32,
+        end: f32,
+        point_lights: &[PointLight],
+    ) -> Option<Self> {
+        if end.is_nan() || end <= begin.max(0.0) {
             return None;
         }
         let mut lights = ArrayVec::new();
         for light in point_lights.iter().take(MAX_POINT_LIGHTS) {
             let Some((start, stop)) = light.reach(ray, end) else { continue };
+            let start = start.max(begin);
+            if start >= stop {
+                continue;
+            }
             let to = light.position - ray.origin;
             let foot = to.dot(ray.direction);
             // The cross product keeps the distance accurate for lights near the ray, where
@@ -207,6 +221,29 @@ mod tests {
             if any { crossed += 1 } else { missed += 1 }
         }
         assert!(crossed > 400 && missed > 400, "crossed {crossed}, missed {missed}");
+    }
+
+    #[test]
+    fn a_stretch_that_begins_later_holds_all_the_density() {
+        let (ray, end, lights) = cases().swap_remove(3);
+        let begin = 1.5;
+        let e = Equiangular::between(&ray, begin, end, &lights).expect("lights");
+        let pdf = |t: f64| f64::from(e.pdf(t as f32));
+        assert_eq!(integrate_1d(&pdf, 0.0, 1.499, 100), 0.0);
+        let total = integrate_1d(&pdf, f64::from(begin), f64::from(end), 20_000);
+        assert!((total - 1.0).abs() < 1e-3, "integral {total}");
+        let mut sampler = crate::rng::Sampler::new(6, 0, 0);
+        let samples: Vec<f64> = (0..100_000)
+            .map(|_| f64::from(e.sample(sampler.next_1d(), sampler.next_1d(), end)))
+            .collect();
+        assert!(samples.iter().all(|&t| t >= f64::from(begin) && t < f64::from(end)));
+        let edges = equal_mass_edges(&|t| cdf(&e, t), f64::from(begin), f64::from(end), 48);
+        chi2_1d(&samples, &pdf, &edges, &[]).assert_pass(1e-4, "from t = 1.5");
+        // A stretch that ends before it begins, or lights that reach only before it: none.
+        assert!(Equiangular::between(&ray, 3.0, 2.0, &lights).is_none());
+        let early = PointLight { position: ray.at(0.5) + Vec3A::Y, cone: Some((-Vec3A::Y, 0.99)) };
+        assert!(Equiangular::between(&ray, 0.0, 6.0, &[early]).is_some());
+        assert!(Equiangular::between(&ray, 2.0, 6.0, &[early]).is_none());
     }
 
     #[test]

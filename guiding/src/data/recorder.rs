@@ -16,6 +16,8 @@
 //! segment), or equivalently with `add_weighted_contribution(C)`, the pixel contribution
 //! `C = beta L` the renderer adds to its film. It propagates backwards: vertex `j` gains
 //! `L beta_N / beta_j`. Throughputs are scalars (use the luminance or channel average).
+//! Where roulette or splitting acted after the last vertex (a survivor weighted by `1 / q`),
+//! report the pixel contribution: only it carries that factor.
 //!
 //! Next-event estimation at the last vertex is reported with `add_direct_sample`, a separate
 //! training sample with its own direction and light-sampling pdf. A vertex that emits `m`
