@@ -257,40 +257,45 @@ pub fn run(
     };
     let fractions = [0.125, 0.25, 0.5];
     let steps = fractions.len() + protocol.seeds.len();
-    let mut results = Vec::with_capacity(methods.len());
-    for (mi, m) in methods.iter().enumerate() {
+    let render_at = |scene: &mut Scene, m: &Method, fraction: f64, seed: u64| {
         scene.set_tracker(m.tracker).map_err(|e| CompareError::Tracker {
             method: m.name.clone(),
             message: e.to_string(),
         })?;
-        let render_at = |fraction: f64, seed: u64| {
-            let mut options = m.options.clone();
-            options.seed = seed;
-            options.budget = scaled(protocol.budget, fraction, &mut options);
-            let r = render(scene, &options, &|_, _| true)?;
-            let seconds = r.seconds + r.training.as_ref().map_or(0.0, |t| t.seconds);
-            Ok::<_, CompareError>((r, seconds))
-        };
-        let mut checkpoints = Vec::new();
+        let mut options = m.options.clone();
+        options.seed = seed;
+        options.budget = scaled(protocol.budget, fraction, &mut options);
+        let r = render(scene, &options, &|_, _| true)?;
+        let seconds = r.seconds + r.training.as_ref().map_or(0.0, |t| t.seconds);
+        Ok::<_, CompareError>((r, seconds))
+    };
+    // The convergence curves first, then the seeds' runs taken in turns across the methods,
+    // so that a machine whose speed drifts during the comparison favours no method.
+    let mut checkpoints = Vec::with_capacity(methods.len());
+    for (mi, m) in methods.iter().enumerate() {
+        let mut curve = Vec::with_capacity(fractions.len() + 1);
         for (ci, &fraction) in fractions.iter().enumerate() {
             progress(mi, ci, steps);
-            let (r, seconds) = render_at(fraction, first_seed)?;
-            checkpoints.push(Checkpoint {
+            let (r, seconds) = render_at(scene, m, fraction, first_seed)?;
+            curve.push(Checkpoint {
                 fraction,
                 seconds,
                 spp: r.spp,
                 error: measure(&r.image, 0.0)?,
             });
         }
-        let mut runs = Vec::with_capacity(protocol.seeds.len());
-        let mut image = Vec::new();
-        for (k, &seed) in protocol.seeds.iter().enumerate() {
+        checkpoints.push(curve);
+    }
+    let mut runs = vec![Vec::with_capacity(protocol.seeds.len()); methods.len()];
+    let mut images = vec![Vec::new(); methods.len()];
+    for (k, &seed) in protocol.seeds.iter().enumerate() {
+        for (mi, m) in methods.iter().enumerate() {
             progress(mi, fractions.len() + k, steps);
-            let (r, seconds) = render_at(1.0, seed)?;
+            let (r, seconds) = render_at(scene, m, 1.0, seed)?;
             let error = measure(&r.image, 0.0)?;
             if k == 0 {
-                checkpoints.push(Checkpoint { fraction: 1.0, seconds, spp: r.spp, error });
-                image = r.image.clone();
+                checkpoints[mi].push(Checkpoint { fraction: 1.0, seconds, spp: r.spp, error });
+                images[mi] = r.image.clone();
             }
             let training = r.training.as_ref().map(|t| RunTraining {
                 passes: t.passes,
@@ -298,7 +303,7 @@ pub fn run(
                 seconds: t.seconds,
                 stop: t.stop,
             });
-            runs.push(Run {
+            runs[mi].push(Run {
                 seed,
                 seconds,
                 spp: r.spp,
@@ -308,6 +313,9 @@ pub fn run(
                 selection: r.selection.clone(),
             });
         }
+    }
+    let mut results = Vec::with_capacity(methods.len());
+    for (((m, runs), checkpoints), image) in methods.iter().zip(runs).zip(checkpoints).zip(images) {
         let excess = runs
             .iter()
             .map(|r| r.error.reference_noise.map(|n| n.excess.all))
@@ -526,6 +534,45 @@ mod tests {
         ] {
             let e = Method::parse(spec, &base).expect_err(spec).to_string();
             assert!(e.contains(says), "{spec}: {e}");
+        }
+    }
+
+    #[test]
+    fn full_budget_runs_take_turns_across_the_methods() {
+        let text = r#"
+[camera]
+origin = [0, 0, 3]
+target = [0, 0, 0]
+fov = 40
+resolution = [4, 3]
+
+[[shapes]]
+type = "sphere"
+center = [0, 0, 0]
+radius = 1
+
+[[lights]]
+type = "constant"
+radiance = 1
+"#;
+        let mut scene = zerovar::scene::load_str(std::path::Path::new("turns.toml"), text, &[])
+            .expect("a valid scene");
+        let base = RenderOptions::unguided(Budget::Samples(2), 1);
+        let methods = ["a", "b"].map(|n| Method::parse(n, &base).expect("a bare name"));
+        let reference = vec![[0.5f32; 3]; 12];
+        let protocol = Protocol { budget: Budget::Samples(2), seeds: vec![7, 8], trim: 0.0 };
+        let order = std::cell::RefCell::new(Vec::new());
+        let results = run(&mut scene, &reference, None, &methods, &protocol, &|m, step, _| {
+            order.borrow_mut().push((m, step));
+        })
+        .expect("the comparison runs");
+        // Three convergence checkpoints per method, then seed 7 for a and b, then seed 8.
+        let expected =
+            [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (0, 3), (1, 3), (0, 4), (1, 4)];
+        assert_eq!(order.into_inner(), expected);
+        for r in &results {
+            assert_eq!(r.runs.iter().map(|run| run.seed).collect::<Vec<_>>(), [7, 8]);
+            assert_eq!(r.checkpoints.len(), 4);
         }
     }
 }
