@@ -1,9 +1,11 @@
 //! The perspective pinhole camera, placed by a look-at transform (Mitsuba 3 conventions: the
 //! field of view is measured along the horizontal axis by default, image x runs to the right
-//! and image y downwards), with a box pixel filter: a sample lands uniformly in its pixel.
+//! and image y downwards), with a pixel filter that spreads each pixel's samples over the film
+//! (a box by default: a sample lands uniformly in its pixel; see [`crate::filter`]).
 //! Its rays start on the near clipping plane and reach the far one, as Mitsuba's do: for a
 //! camera inside a medium, the near plane decides how much of it lies before the first ray.
 
+use crate::filter::PixelFilter;
 use crate::math::Ray;
 use crate::transform::Transform;
 use glam::{Vec2, Vec3A};
@@ -29,6 +31,8 @@ pub struct Camera {
     /// Distances of the clipping planes from the eye, along the view axis.
     near: f32,
     far: f32,
+    /// How a pixel's samples spread over the film.
+    filter: PixelFilter,
 }
 
 impl Camera {
@@ -42,7 +46,18 @@ impl Camera {
             FovAxis::Y => Vec2::new(t * aspect, t),
         };
         let origin = to_world.point(Vec3A::ZERO);
-        Self { to_world, origin, tan_half, resolution, near: 0.0, far: f32::INFINITY }
+        let (near, far, filter) = (0.0, f32::INFINITY, PixelFilter::Box);
+        Self { to_world, origin, tan_half, resolution, near, far, filter }
+    }
+
+    /// The camera with pixel filter `filter` (a box by default).
+    pub fn with_filter(self, filter: PixelFilter) -> Self {
+        Self { filter, ..self }
+    }
+
+    /// The pixel filter.
+    pub fn filter(&self) -> PixelFilter {
+        self.filter
     }
 
     /// The camera with clipping planes `near` and `far` (distances along the view axis, with

@@ -31,7 +31,7 @@
 //! The **building blocks** are public for research code that assembles its own integrator
 //! or extends the renderer: [`media`] (with the [`media::DensityFunction`] trait for host
 //! densities), [`tracking`] (free-flight and transmittance estimators), [`phase`], [`bsdf`],
-//! [`lights`], [`camera`], [`shapes`], [`integrators`], [`math`], [`rng`], [`transform`] and
+//! [`lights`], [`camera`], [`filter`], [`shapes`], [`integrators`], [`math`], [`rng`], [`transform`] and
 //! [`files`]; they follow the same rules but change more freely between versions. The
 //! acceleration structure and sampling tables are private.
 
@@ -41,6 +41,7 @@ pub mod camera;
 mod distribution;
 pub mod files;
 pub mod film;
+pub mod filter;
 pub mod guided;
 pub mod integrators;
 pub mod lights;

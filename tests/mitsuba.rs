@@ -130,9 +130,20 @@ fn compare(ours: &[[f32; 3]], our_se: &[[f32; 3]], theirs: &Reference, scale: f3
 fn validate(name: &str, spp: u32) {
     let xml = repo(&format!("tests/data/mitsuba/{name}.xml"));
     let scene = zerovar::scene::load(&xml, &[]).unwrap_or_else(|e| panic!("{e}"));
+    validate_scene(name, &scene, spp);
+}
+
+/// [`validate`] for `scene`, loaded from `{name}.xml` or an edit of it.
+fn validate_scene(name: &str, scene: &zerovar::scene::Scene, spp: u32) {
+    let agreement = agreement(name, scene, spp);
+    assert!(agreement.passes(), "{name}: zerovar disagrees with Mitsuba 3: {agreement:?}");
+}
+
+/// How `scene`'s render agrees with `{name}.exr`; panics when a 5% change to it would pass.
+fn agreement(name: &str, scene: &zerovar::scene::Scene, spp: u32) -> Agreement {
     let theirs = read_reference(&repo(&format!("tests/data/mitsuba/{name}.exr")));
     let (w, h) = (theirs.width, theirs.height);
-    let result = render(&scene, &RenderOptions::unguided(Budget::Samples(spp), 11), &|_, _| true)
+    let result = render(scene, &RenderOptions::unguided(Budget::Samples(spp), 11), &|_, _| true)
         .unwrap_or_else(|e| panic!("{e}"));
     assert_eq!((result.film.width(), result.film.height()), (w as u32, h as u32), "{name}");
     let ours: Vec<[f32; 3]> = result.film.pixels().iter().map(|p| p.mean()).collect();
@@ -177,10 +188,10 @@ fn validate(name: &str, spp: u32) {
         agreement.whole,
         agreement.quadrants
     );
-    assert!(agreement.passes(), "{name}: zerovar disagrees with Mitsuba 3: {agreement:?}");
     let scaled = compare(&ours, &se, &theirs, 1.05);
     println!("{name}, ours x 1.05: {scaled:?}");
     assert!(!scaled.passes(), "{name}: the comparison does not see a 5% change: {scaled:?}");
+    agreement
 }
 
 #[test]
@@ -307,4 +318,25 @@ fn mitsuba_r_serialized_meshes() {
 #[test]
 fn mitsuba_s_masks_in_fog() {
     validate("s-mask-fog", 4096);
+}
+
+/// Mitsuba's default pixel filter (a Gaussian: the film names none) and `hide_emitters`, under
+/// a constant sky: the light and the sky seen directly are black. The same scene with a box
+/// filter disagrees with Mitsuba's image: the test sees the filter.
+#[test]
+fn mitsuba_t_default_gaussian_filter_and_hidden_emitters() {
+    validate("t-gaussian-hidden", 1024);
+    let xml = repo("tests/data/mitsuba/t-gaussian-hidden.xml");
+    let text = std::fs::read_to_string(&xml).unwrap();
+    let boxed = text.replace("</film>", "<rfilter type=\"box\"/></film>");
+    assert_ne!(boxed, text);
+    let scene = zerovar::scene::load_str(&xml, &boxed, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let boxed = agreement("t-gaussian-hidden", &scene, 1024);
+    assert!(!boxed.passes(), "a box filter must disagree with Mitsuba's Gaussian: {boxed:?}");
+}
+
+/// A tent filter of radius 1.5.
+#[test]
+fn mitsuba_u_tent_filter() {
+    validate("u-tent", 1024);
 }

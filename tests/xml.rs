@@ -95,6 +95,7 @@ const CAMERA: &str = r#"
         <film type="hdrfilm">
             <integer name="width" value="30"/>
             <integer name="height" value="40"/>
+            <rfilter type="box"/>
         </film>
     </sensor>"#;
 
@@ -187,6 +188,8 @@ origin = [0, 3, 6]
 target = [0, 0, 0]
 fov = 40
 resolution = [24, 18]
+# Mitsuba's filter where the film names none.
+filter = { type = "gaussian", stddev = 0.5 }
 
 [[shapes]]
 type = "rectangle"
@@ -461,6 +464,27 @@ fn bad_input_names_the_place_and_the_fix() {
             "<float name=\"fov\" value=\"40\"/><film type=\"hdrfilm\"><integer name=\"width\" value=\"4294967312\"/></film>",
             "width.xml:3:39",
             &["width 4294967312 must be between 1 and 32768 pixels"],
+        ),
+        (
+            "lanczos",
+            "<float name=\"fov\" value=\"40\"/>",
+            "<float name=\"fov\" value=\"40\"/><film type=\"hdrfilm\"><rfilter type=\"lanczos\"/></film>",
+            "lanczos.xml:3:60",
+            &["the `lanczos` pixel filter is not supported", "box, tent or gaussian"],
+        ),
+        (
+            "wide-box",
+            "<float name=\"fov\" value=\"40\"/>",
+            "<float name=\"fov\" value=\"40\"/><film type=\"hdrfilm\"><rfilter type=\"box\"><float name=\"radius\" value=\"1\"/></rfilter></film>",
+            "wide-box.xml:3:60",
+            &["a box filter of radius 1", "use a tent or gaussian filter"],
+        ),
+        (
+            "stddev",
+            "<float name=\"fov\" value=\"40\"/>",
+            "<float name=\"fov\" value=\"40\"/><film type=\"hdrfilm\"><rfilter type=\"gaussian\"><float name=\"stddev\" value=\"-0.5\"/></rfilter></film>",
+            "stddev.xml:3:60",
+            &["<rfilter type=\"gaussian\">", "stddev -0.5 must be a positive number of pixels"],
         ),
     ];
     let sky = "<emitter type=\"constant\"/>";
@@ -786,6 +810,67 @@ fn max_depth_zero_is_black_and_one_is_emitters_only() {
     // The light's own radiance in the pixels that see it, nothing elsewhere.
     assert!(one.0 > 0.0 && one.1 < 20, "max_depth 1: {one:?}");
     assert!(two.0 > one.0 && two.1 > 300, "max_depth 2: {two:?}");
+}
+
+/// `hide_emitters` removes exactly what the camera sees of emitters before any scattering
+/// event: through fog and null crossings, the hidden image plus the emitters-only image
+/// (`max_depth` 1, the same random numbers) is the visible one; against a sky, the pixels that
+/// see only the sky are black and those that see only the sphere are unchanged.
+#[test]
+fn hide_emitters_hides_what_the_camera_sees_directly_and_nothing_else() {
+    let text = std::fs::read_to_string(repo("tests/data/mitsuba/k-fog-room-walls.xml")).unwrap();
+    let render_with = |name: &str, edits: &[(&str, &str)]| {
+        let mut t = text.clone();
+        for (from, to) in edits {
+            assert!(t.contains(from), "{from}");
+            t = t.replace(from, to);
+        }
+        image(&xml(name, &t, &[]).unwrap(), 3)
+    };
+    let depth = "<integer name=\"max_depth\" value=\"8\"/>";
+    let hide =
+        "<integer name=\"max_depth\" value=\"8\"/><boolean name=\"hide_emitters\" value=\"true\"/>";
+    let visible = render_with("shown.xml", &[]);
+    let hidden = render_with("hidden.xml", &[(depth, hide)]);
+    let direct = render_with("direct.xml", &[(depth, "<integer name=\"max_depth\" value=\"1\"/>")]);
+    let mut seen = 0;
+    for ((v, h), d) in visible.iter().zip(&hidden).zip(&direct) {
+        seen += usize::from(d[0] > 0.0);
+        for c in 0..3 {
+            let sum = h[c] + d[c];
+            assert!(
+                (v[c] - sum).abs() <= 1e-5 * v[c].max(1.0),
+                "visible {v:?}, hidden {h:?} + direct {d:?}"
+            );
+        }
+    }
+    assert!(seen > 0, "the camera must see the light in some pixels");
+
+    let body = r#"
+        <shape type="sphere"><float name="radius" value="1"/></shape>
+        <emitter type="constant"><rgb name="radiance" value="0.8"/></emitter>"#;
+    let lookat = r#"<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#;
+    let sky = with_camera(lookat, body);
+    let shown = image(&xml("sky-shown.xml", &sky, &[]).unwrap(), 5);
+    let hidden_sky = sky.replace(
+        "<integrator type=\"volpath\"/>",
+        "<integrator type=\"volpath\"><boolean name=\"hide_emitters\" value=\"true\"/></integrator>",
+    );
+    let hidden = image(&xml("sky-hidden.xml", &hidden_sky, &[]).unwrap(), 5);
+    let [w, h] = xml("sky-shown.xml", &sky, &[]).unwrap().camera().resolution();
+    let (corner, centre) = (0, (h / 2 * w + w / 2) as usize);
+    assert!(
+        shown[corner][0] > 0.5 && hidden[corner] == [0.0; 3],
+        "{:?} {:?}",
+        shown[corner],
+        hidden[corner]
+    );
+    assert!(
+        shown[centre][0] > 0.0 && hidden[centre] == shown[centre],
+        "{:?} {:?}",
+        shown[centre],
+        hidden[centre]
+    );
 }
 
 /// A sensor without `fov` takes Mitsuba's 50 mm lens on 36 x 24 mm film (or `focal_length`),
@@ -1198,6 +1283,10 @@ fn camera_rays_run_between_mitsubas_clipping_planes() {
     let bad = [
         ("near_clip = -1", "near_clip -1 must be a finite distance, 0 or more"),
         ("near_clip = 2\nfar_clip = 2", "far_clip 2 must lie beyond near_clip 2"),
+        // And the pixel filter, which TOML cameras name too.
+        ("filter = { type = \"tent\", radius = 0 }", "tent radius 0 must be above 0"),
+        ("filter = { type = \"gaussian\", stddev = 1e6 }", "at most 1024 pixels"),
+        ("filter = { type = \"mitchell\" }", "unknown variant `mitchell`"),
     ];
     for (clip, what) in bad {
         let text = format!(

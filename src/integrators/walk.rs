@@ -563,8 +563,17 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         }
     }
 
+    /// Whether the emitters the path finds now are hidden: seen straight from the camera
+    /// (Mitsuba's `hide_emitters`, depth 0 after any null crossings).
+    fn hides_emitters(&self, s: &PathState) -> bool {
+        s.depth == 0 && self.scene.settings().hide_emitters
+    }
+
     /// The path escaped: infinite lights it sees, weighed against next-event estimation.
     fn escape(&mut self, s: &PathState) {
+        if self.hides_emitters(s) {
+            return;
+        }
         for &li in &self.scene.infinite_lights {
             let (le, pdf) = self.scene.lights[li as usize].eval_escaped(s.ray.direction);
             if le.max_element() > 0.0 {
@@ -578,6 +587,9 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
     fn emitter_hit(&mut self, s: &PathState, hit: &SurfaceHit) {
         let scene = self.scene;
         let Some(li) = scene.surfaces[hit.shape as usize].light else { return };
+        if self.hides_emitters(s) {
+            return;
+        }
         let light = &scene.lights[li as usize];
         let le = light.eval_area(hit.ng, -s.ray.direction);
         if le.max_element() > 0.0 {

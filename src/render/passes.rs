@@ -10,7 +10,6 @@ use crate::math::{Spectrum, is_finite, luminance};
 use crate::rng::Sampler;
 use crate::scene::Scene;
 use crate::stats::Counters;
-use glam::Vec2;
 use rayon::prelude::*;
 use zerovar_guiding::{Field, PathRecorder, Sample};
 
@@ -263,8 +262,9 @@ pub(super) fn camera_sample<C: RadianceCache>(
 ) -> Spectrum {
     let pixel = u64::from(y) * u64::from(scene.camera.resolution()[0]) + u64::from(x);
     let mut sampler = Sampler::new(seed, pixel, u64::from(s));
-    let jitter = sampler.next_2d();
-    let start = walk::PathStart::camera(scene, Vec2::new(x as f32, y as f32) + jitter);
+    let camera = &scene.camera;
+    let film = camera.filter().film_position([x, y], camera.resolution(), &mut sampler);
+    let start = walk::PathStart::camera(scene, film);
     walk::radiance(settings, scene, start, ctx, &mut sampler, counters)
 }
 

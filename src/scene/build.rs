@@ -9,6 +9,7 @@ use crate::bsdf::{
     RoughDielectric, RoughPlastic, Texture, Wrap, srgb_to_linear,
 };
 use crate::camera::Camera;
+use crate::filter::PixelFilter;
 use crate::lights::{EnvMap, Light};
 use crate::math::{Frame, Spectrum};
 use crate::media::{
@@ -29,6 +30,10 @@ const MAX_PIXELS: u64 = 1 << 25;
 
 /// The most pixels along either side of the image.
 pub(crate) const MAX_SIDE: i64 = 1 << 15;
+
+/// The widest pixel filter (tent radius or Gaussian stddev), in pixels: wider blurs a whole
+/// image of the largest size into a few pixels' worth of detail.
+const MAX_FILTER_WIDTH: f32 = 1024.0;
 
 /// The largest coordinate a camera's origin or target may have: a ray's squared length
 /// overflows single precision near 1.8e19, and far below that the scene cannot be resolved.
@@ -76,8 +81,18 @@ fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
         return cx
             .err(format!("far_clip {} must lie beyond near_clip {}", cam.far_clip, cam.near_clip));
     }
+    let (what, width) = match cam.filter {
+        PixelFilter::Box => ("", 1.0),
+        PixelFilter::Tent { radius } => ("tent radius", radius),
+        PixelFilter::Gaussian { stddev } => ("gaussian stddev", stddev),
+    };
+    if !(width > 0.0 && width <= MAX_FILTER_WIDTH) {
+        return cx.err(format!(
+            "pixel filter: {what} {width} must be above 0 and at most {MAX_FILTER_WIDTH} pixels"
+        ));
+    }
     let camera = Camera::new(to_world, cam.fov, cam.fov_axis, resolution);
-    Ok(camera.with_clip(cam.near_clip, cam.far_clip))
+    Ok(camera.with_clip(cam.near_clip, cam.far_clip).with_filter(cam.filter))
 }
 
 /// The file being built and the element being looked at, for error messages.
@@ -238,6 +253,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
         max_depth: (r.max_depth >= 0).then_some(r.max_depth as u32),
         rr_depth: r.rr_depth,
         seed: r.seed,
+        hide_emitters: r.hide_emitters,
         surface_events_only: r.surface_events_only,
     };
 

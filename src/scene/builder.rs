@@ -129,6 +129,7 @@ impl CameraDesc {
             medium: None,
             near_clip: 0.0,
             far_clip: f32::INFINITY,
+            filter: Default::default(),
         }
     }
 }

@@ -109,6 +109,9 @@ pub struct RenderDesc {
     pub rr_depth: u32,
     /// Seed of the random streams when the command line gives none.
     pub seed: u64,
+    /// Emitters seen directly from the camera (before any scattering event) count zero, as
+    /// with Mitsuba's `hide_emitters`: a cloud against a black background, lit by its sky.
+    pub hide_emitters: bool,
     /// Every surface hit is a scattering event, as Mitsuba's `path` integrator counts them
     /// (set by the XML reader for it): a thin dielectric's transmission then counts depth and
     /// blocks shadow rays, where Mitsuba's `volpath` takes it as a null event.
@@ -118,7 +121,14 @@ pub struct RenderDesc {
 
 impl Default for RenderDesc {
     fn default() -> Self {
-        Self { spp: 64, max_depth: -1, rr_depth: 5, seed: 0, surface_events_only: false }
+        Self {
+            spp: 64,
+            max_depth: -1,
+            rr_depth: 5,
+            seed: 0,
+            hide_emitters: false,
+            surface_events_only: false,
+        }
     }
 }
 
@@ -149,6 +159,9 @@ pub struct CameraDesc {
     /// Distance of the far clipping plane: nothing beyond it is seen (default: none).
     #[serde(default = "no_far_clip")]
     pub far_clip: f32,
+    /// How each pixel's samples spread over the film (default: a box, uniform in the pixel).
+    #[serde(default)]
+    pub filter: crate::filter::PixelFilter,
 }
 
 fn up() -> Vec3 {

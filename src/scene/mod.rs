@@ -173,6 +173,9 @@ pub struct RenderSettings {
     pub rr_depth: u32,
     /// Default seed.
     pub seed: u64,
+    /// Emitters and infinite lights that a path finds before its first scattering event
+    /// count zero (Mitsuba's `hide_emitters`).
+    pub hide_emitters: bool,
     /// Every surface hit scatters, none is a null event but a null surface's (Mitsuba's
     /// `path` integrator; see `RenderDesc::surface_events_only`).
     pub surface_events_only: bool,

@@ -7,6 +7,7 @@ use super::props::Props;
 use super::tree::{Object, Value};
 use super::{Conv, Result, compose, spanned};
 use crate::camera::FovAxis;
+use crate::filter::PixelFilter;
 use crate::scene::build::MAX_SIDE;
 use crate::scene::desc::{CameraDesc, LightDesc, RenderDesc, SceneDesc, TransformStep};
 use glam::Vec3;
@@ -82,9 +83,9 @@ pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
         ));
     };
     let (camera, render) = camera(conv, sensor)?;
-    let (kind, max_depth, rr_depth) = match integrator {
+    let Integrator { kind, max_depth, rr_depth, hide_emitters } = match integrator {
         Some(o) => self::integrator(o)?,
-        None => ("path", -1, 5),
+        None => Integrator { kind: "path", max_depth: -1, rr_depth: 5, hide_emitters: false },
     };
     if kind == "path" {
         let null =
@@ -101,7 +102,13 @@ pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
     Ok(SceneDesc {
         defaults: toml::Table::new(),
         camera,
-        render: RenderDesc { max_depth, rr_depth, surface_events_only: kind == "path", ..render },
+        render: RenderDesc {
+            max_depth,
+            rr_depth,
+            hide_emitters,
+            surface_events_only: kind == "path",
+            ..render
+        },
         medium: None,
         media: std::mem::take(&mut conv.media),
         shapes,
@@ -136,9 +143,9 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
         )));
     }
     let medium = p.object("medium")?.map(|m| conv.medium(m)).transpose()?;
-    let resolution = match p.object("film")? {
+    let (resolution, filter) = match p.object("film")? {
         Some(f) => film(f)?,
-        None => [768, 576],
+        None => ([768, 576], MITSUBA_FILTER),
     };
     let render = match p.object("sampler")? {
         Some(s) => sampler(s)?,
@@ -198,12 +205,23 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
             (origin, origin + Vec3::from(m.z_axis), Vec3::from(m.y_axis))
         }
     };
-    let camera =
-        CameraDesc { origin, target, up, fov, fov_axis, resolution, medium, near_clip, far_clip };
+    let camera = CameraDesc {
+        origin,
+        target,
+        up,
+        fov,
+        fov_axis,
+        resolution,
+        medium,
+        near_clip,
+        far_clip,
+        filter,
+    };
     Ok((spanned(&o.pos, camera), render))
 }
 
-fn film(o: &Rc<Object>) -> Result<[i64; 2]> {
+/// The film's resolution and pixel filter.
+fn film(o: &Rc<Object>) -> Result<([i64; 2], PixelFilter)> {
     let p = Props::new(o);
     if o.kind != "hdrfilm" {
         return Err(p.err("zerovar has only the `hdrfilm` film"));
@@ -231,17 +249,51 @@ fn film(o: &Rc<Object>) -> Result<[i64; 2]> {
             )));
         }
     }
-    if let Some(f) = p.object("rfilter")? {
-        let fp = Props::new(f);
-        if f.kind != "box" {
-            return Err(fp.err(
-                "zerovar's camera uses a box pixel filter only; use <rfilter type=\"box\"/>",
-            ));
-        }
-        fp.finish()?;
-    }
+    let filter = match p.object("rfilter")? {
+        Some(f) => rfilter(f)?,
+        None => MITSUBA_FILTER,
+    };
     p.finish()?;
-    Ok(resolution)
+    Ok((resolution, filter))
+}
+
+/// Mitsuba's pixel filter where a film names none.
+const MITSUBA_FILTER: PixelFilter = PixelFilter::Gaussian { stddev: 0.5 };
+
+/// The float `name` of `p` (`default` without it), which must be positive and finite.
+fn positive(p: &Props<'_>, name: &'static str, default: f32) -> Result<f32> {
+    let v = p.float(name)?.unwrap_or(default);
+    if v > 0.0 && v.is_finite() {
+        Ok(v)
+    } else {
+        Err(p.err(format!("{name} {v} must be a positive number of pixels")))
+    }
+}
+
+/// An `<rfilter>`: `box` (radius 0.5 only), `tent` (`radius`) or `gaussian` (`stddev`).
+fn rfilter(o: &Rc<Object>) -> Result<PixelFilter> {
+    let p = Props::new(o);
+    let filter = match o.kind.as_str() {
+        "box" => match p.float("radius")? {
+            None | Some(0.5) => PixelFilter::Box,
+            Some(r) => {
+                return Err(p.err(format!(
+                    "a box filter of radius {r}: zerovar's box filter is its pixel (radius \
+                     0.5); remove the radius, or use a tent or gaussian filter"
+                )));
+            }
+        },
+        "tent" => PixelFilter::Tent { radius: positive(&p, "radius", 1.0)? },
+        "gaussian" => PixelFilter::Gaussian { stddev: positive(&p, "stddev", 0.5)? },
+        other => {
+            return Err(p.err(format!(
+                "the `{other}` pixel filter is not supported; use box, tent or gaussian (the \
+                 filters without negative lobes)"
+            )));
+        }
+    };
+    p.finish()?;
+    Ok(filter)
 }
 
 fn sampler(o: &Rc<Object>) -> Result<RenderDesc> {
@@ -263,8 +315,17 @@ fn sampler(o: &Rc<Object>) -> Result<RenderDesc> {
     })
 }
 
-/// The integrator's kind (after unwrapping `moment`), max_depth and rr_depth.
-fn integrator(o: &Rc<Object>) -> Result<(&'static str, i64, u32)> {
+/// What an `<integrator>` says.
+struct Integrator {
+    /// `path` or `volpath` (after unwrapping `moment`; `volpathmis` is `volpath`).
+    kind: &'static str,
+    max_depth: i64,
+    rr_depth: u32,
+    hide_emitters: bool,
+}
+
+/// The integrator's kind, depths and `hide_emitters`.
+fn integrator(o: &Rc<Object>) -> Result<Integrator> {
     let p = Props::new(o);
     let kind = match o.kind.as_str() {
         "moment" => {
@@ -285,9 +346,7 @@ fn integrator(o: &Rc<Object>) -> Result<(&'static str, i64, u32)> {
     };
     let max_depth = p.integer("max_depth")?.unwrap_or(-1);
     let rr_depth = p.integer("rr_depth")?.unwrap_or(5);
-    if p.boolean("hide_emitters")? == Some(true) {
-        return Err(p.err("hide_emitters = true is not supported; remove it"));
-    }
+    let hide_emitters = p.boolean("hide_emitters")?.unwrap_or(false);
     p.finish()?;
     if !(-1..=i64::from(u32::MAX)).contains(&max_depth) {
         return Err(p.err(format!("max_depth {max_depth} must be -1 (unlimited) or a depth >= 0")));
@@ -296,5 +355,5 @@ fn integrator(o: &Rc<Object>) -> Result<(&'static str, i64, u32)> {
         .ok()
         .filter(|d| *d > 0)
         .ok_or_else(|| p.err(format!("rr_depth {rr_depth} must be at least 1")))?;
-    Ok((kind, max_depth, rr_depth))
+    Ok(Integrator { kind, max_depth, rr_depth, hide_emitters })
 }
