@@ -5,6 +5,8 @@
                               wisps, values in [0, 1]
     scenes/data/dye.vol       the same shape at 48^3 with three proportional channels (a
                               density times a colour), for a chromatic heterogeneous medium
+    scenes/data/haze.vol      a 32 x 20 x 64 haze (one channel, x y z): smooth noise in about
+                              [0.2, 1], for a heterogeneous fog room
     scenes/data/sunset.exr    a 512 x 256 lat-long sky: a gradient from blue overhead to a
                               warm horizon, a dark ground and a small, bright sun (about
                               1.5 degrees wide, 25 degrees above the horizon)
@@ -57,6 +59,42 @@ def puff(n, seed):
     return np.clip(d * 2.0, 0.0, 1.0).astype(np.float32)
 
 
+def box_noise(shape, cells, rng):
+    """Smooth noise on a grid of `shape` [z, y, x]: random values on a lattice of `cells`
+    [z, y, x] cells, interpolated by a smoothstep."""
+    lattice = rng.random(tuple(c + 1 for c in cells))
+    axes = []
+    for n, c in zip(shape, cells):
+        x = np.linspace(0, c, n, endpoint=False) + 0.5 * c / n
+        i = np.minimum(x.astype(int), c - 1)
+        f = x - i
+        axes.append((i, f * f * (3 - 2 * f)))
+    (iz, fz), (iy, fy), (ix, fx) = axes
+    out = np.zeros(shape)
+    for dz in (0, 1):
+        wz = fz if dz else 1 - fz
+        for dy in (0, 1):
+            wy = fy if dy else 1 - fy
+            for dx in (0, 1):
+                wx = fx if dx else 1 - fx
+                v = lattice[np.ix_(iz + dz, iy + dy, ix + dx)]
+                out += v * wz[:, None, None] * wy[None, :, None] * wx[None, None, :]
+    return out
+
+
+def haze(shape, seed):
+    """Haze density in about [0.2, 1] on a grid of `shape` [z, y, x]: three octaves of smooth
+    noise, denser towards the floor, so that it varies about fivefold."""
+    rng = np.random.default_rng(seed)
+    nz, ny, nx = shape
+    octaves = [(max(2, nz // 8 * k), max(2, ny // 10 * k), max(2, nx // 8 * k)) for k in (1, 2, 4)]
+    noise = sum(box_noise(shape, c, rng) / (k + 1) for k, c in enumerate(octaves))
+    noise /= sum(1 / (k + 1) for k in range(len(octaves)))
+    height = (np.arange(ny) + 0.5) / ny
+    d = 0.2 + 0.8 * np.clip((noise - 0.25) / 0.5, 0, 1) ** 1.5 * (1.1 - 0.5 * height)[None, :, None]
+    return np.clip(d, 0.0, 1.0).astype(np.float32)
+
+
 def write_vol(path, grid, colour=None):
     """A Mitsuba .vol file (float32, x fastest) of `grid` [z, y, x], times `colour` per
     channel when given."""
@@ -94,11 +132,12 @@ def main():
     OUT.mkdir(parents=True, exist_ok=True)
     write_vol(OUT / "puff.vol", puff(64, 7))
     write_vol(OUT / "dye.vol", puff(48, 11), colour=(0.25, 0.6, 1.0))
+    write_vol(OUT / "haze.vol", haze((64, 20, 32), 5))
     sky = sunset(512, 256)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     with OpenEXR.File(header, {"RGB": sky}) as f:
         f.write(str(OUT / "sunset.exr"))
-    print("wrote", OUT / "puff.vol", OUT / "dye.vol", OUT / "sunset.exr")
+    print("wrote", *(OUT / f for f in ("puff.vol", "dye.vol", "haze.vol", "sunset.exr")))
 
 
 if __name__ == "__main__":
