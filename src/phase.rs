@@ -26,14 +26,53 @@ pub enum PhaseFunction {
         /// Mean cosine of the scattering angle.
         g: f32,
     },
+    /// Rayleigh scattering, `3 / (16 pi) (1 + cos^2)`.
+    Rayleigh,
+    /// Mitsuba's `blendphase`: `(1 - weight) first + weight second`.
+    Blend {
+        /// The second lobe's share, in [0, 1].
+        weight: f32,
+        /// The lobe at weight 0.
+        first: Lobe,
+        /// The lobe at weight 1.
+        second: Lobe,
+    },
+}
+
+/// One lobe of a blended phase function.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Lobe {
+    /// Uniform over the sphere.
+    Isotropic,
+    /// Henyey-Greenstein with mean cosine `g` in (-1, 1).
+    HenyeyGreenstein {
+        /// Mean cosine of the scattering angle.
+        g: f32,
+    },
+    /// Rayleigh scattering.
+    Rayleigh,
+}
+
+impl Lobe {
+    /// The lobe as a phase function of its own.
+    pub fn alone(self) -> PhaseFunction {
+        match self {
+            Lobe::Isotropic => PhaseFunction::Isotropic,
+            Lobe::HenyeyGreenstein { g } => PhaseFunction::HenyeyGreenstein { g },
+            Lobe::Rayleigh => PhaseFunction::Rayleigh,
+        }
+    }
 }
 
 impl PhaseFunction {
     /// Mean cosine of the scattering angle.
     pub fn mean_cosine(&self) -> f32 {
         match *self {
-            PhaseFunction::Isotropic => 0.0,
+            PhaseFunction::Isotropic | PhaseFunction::Rayleigh => 0.0,
             PhaseFunction::HenyeyGreenstein { g } => g,
+            PhaseFunction::Blend { weight, first, second } => {
+                (1.0 - weight) * first.alone().mean_cosine() + weight * second.alone().mean_cosine()
+            }
         }
     }
 
@@ -43,6 +82,11 @@ impl PhaseFunction {
         match *self {
             PhaseFunction::Isotropic => INV_FOUR_PI,
             PhaseFunction::HenyeyGreenstein { g } => hg_vectors(g, ray_dir, wi),
+            PhaseFunction::Rayleigh => rayleigh(ray_dir.dot(wi).clamp(-1.0, 1.0)),
+            PhaseFunction::Blend { weight, first, second } => {
+                (1.0 - weight) * first.alone().eval(ray_dir, wi)
+                    + weight * second.alone().eval(ray_dir, wi)
+            }
         }
     }
 
@@ -50,6 +94,25 @@ impl PhaseFunction {
     #[inline]
     pub fn sample(&self, ray_dir: Vec3A, u: Vec2) -> (Vec3A, f32) {
         match *self {
+            PhaseFunction::Rayleigh => {
+                let cos = sample_rayleigh_cos(u.x);
+                let sin = ((1.0 - cos) * (1.0 + cos)).max(0.0).sqrt();
+                let (sin_phi, cos_phi) = (std::f32::consts::TAU * u.y).sin_cos();
+                let local = Vec3A::new(sin * cos_phi, sin * sin_phi, cos);
+                let wi = Frame::from_z(ray_dir).to_world(local).normalize();
+                (wi, self.eval(ray_dir, wi))
+            }
+            PhaseFunction::Blend { weight, first, second } => {
+                // One lobe by its share, the number reused for its own draw; the density is
+                // the blend's, so the sample weighs one.
+                let (lobe, x) = if u.x < weight {
+                    (second, u.x / weight)
+                } else {
+                    (first, (u.x - weight) / (1.0 - weight))
+                };
+                let (wi, _) = lobe.alone().sample(ray_dir, Vec2::new(x.min(ONE_BELOW), u.y));
+                (wi, self.eval(ray_dir, wi))
+            }
             PhaseFunction::HenyeyGreenstein { g } if g.abs() >= HG_ISOTROPIC_G => {
                 // In f64: near the peak 1 - cos^2 is below an f32 cosine's resolution.
                 let cos = sample_hg_cos(g, u.x);
@@ -68,6 +131,25 @@ impl PhaseFunction {
             }
         }
     }
+}
+
+/// The largest f32 below 1.
+const ONE_BELOW: f32 = 1.0 - f32::EPSILON / 2.0;
+
+/// The Rayleigh density for the cosine between travel and new direction.
+#[inline]
+pub fn rayleigh(cos: f32) -> f32 {
+    (3.0 / (16.0 * std::f32::consts::PI)) * (1.0 + cos * cos)
+}
+
+/// Inverse CDF of the Rayleigh cosine distribution: the real root of
+/// `c^3 + 3 c + 4 - 8 u = 0`, `a - 1 / a` with `a = cbrt(z + sqrt(z^2 + 1))`, `z = 4 u - 2`
+/// (Cardano), taken for `z >= 0` and mirrored, where it does not cancel.
+#[inline]
+fn sample_rayleigh_cos(u: f32) -> f32 {
+    let z = 4.0 * f64::from(u) - 2.0;
+    let a = (z.abs() + (z * z + 1.0).sqrt()).cbrt();
+    ((a - 1.0 / a).copysign(z) as f32).clamp(-1.0, 1.0)
 }
 
 /// The Henyey-Greenstein density for the cosine between travel and new direction.
@@ -161,6 +243,48 @@ mod tests {
             let grid = grid_for(g, axis);
             grid.chi2(&dirs, &|d: DVec3| p.eval(axis, d.as_vec3a()) as f64)
                 .assert_pass(1e-3, &format!("HG g={g}"));
+        }
+    }
+
+    /// Rayleigh and blends of two lobes: densities that integrate to one, samples that follow
+    /// them (with the density `sample` returns equal to `eval`), and the blend's mean cosine.
+    #[test]
+    fn rayleigh_and_blends_sample_their_densities() {
+        let axis = Vec3A::new(0.4, 0.1, -0.9).normalize();
+        let hg = |g| Lobe::HenyeyGreenstein { g };
+        let cases = [
+            (PhaseFunction::Rayleigh, 0.0),
+            (PhaseFunction::Blend { weight: 0.3, first: hg(0.8), second: hg(-0.4) }, 0.44),
+            (
+                PhaseFunction::Blend {
+                    weight: 0.5,
+                    first: Lobe::Isotropic,
+                    second: Lobe::Rayleigh,
+                },
+                0.0,
+            ),
+            (PhaseFunction::Blend { weight: 1.0, first: hg(0.5), second: hg(0.9) }, 0.9),
+            (PhaseFunction::Blend { weight: 0.0, first: hg(0.5), second: hg(0.9) }, 0.5),
+        ];
+        for (k, (p, mean)) in cases.into_iter().enumerate() {
+            assert!((p.mean_cosine() - mean).abs() < 1e-6, "{p:?}");
+            let grid =
+                SphereGrid { axis: axis.as_dvec3(), theta_scale: 0.5, n_theta: 48, n_phi: 8 };
+            let total = grid.integrate(&|d: DVec3| p.eval(axis, d.as_vec3a()) as f64);
+            assert!((total - 1.0).abs() < 1e-4, "{p:?}: integral {total}");
+            let mut s = Sampler::new(9, k as u64, 0);
+            let mut dirs = Vec::with_capacity(200_000);
+            let mut cosines = zerovar_testkit::MeanEstimate::default();
+            for _ in 0..200_000 {
+                let (d, pdf) = p.sample(axis, s.next_2d());
+                let e = p.eval(axis, d);
+                assert!((pdf - e).abs() <= 1e-5 * e, "{p:?}: pdf {pdf} vs eval {e}");
+                cosines.push(f64::from(d.dot(axis)));
+                dirs.push(d.as_dvec3());
+            }
+            grid.chi2(&dirs, &|d: DVec3| p.eval(axis, d.as_vec3a()) as f64)
+                .assert_pass(1e-3, &format!("{p:?}"));
+            cosines.assert_matches(f64::from(mean), 4.5, &format!("mean cosine of {p:?}"));
         }
     }
 

@@ -340,3 +340,10 @@ fn mitsuba_t_default_gaussian_filter_and_hidden_emitters() {
 fn mitsuba_u_tent_filter() {
     validate("u-tent", 1024);
 }
+
+/// `blendphase` of an HG lobe and a Rayleigh one, its two phases written out of their names'
+/// order (Mitsuba takes them as written), lit from behind the medium.
+#[test]
+fn mitsuba_v_blended_phase_function() {
+    validate("v-blendphase", 1024);
+}

@@ -1296,3 +1296,71 @@ fn camera_rays_run_between_mitsubas_clipping_planes() {
         assert!(e.contains(what) && e.contains("clip.toml"), "{e}");
     }
 }
+
+/// `rayleigh` and `blendphase` read as Mitsuba renders them: a blend's two phases in the order
+/// written, whatever their names; bad blends say what to do.
+#[test]
+fn rayleigh_and_blended_phase_functions() {
+    use zerovar::phase::{Lobe, PhaseFunction};
+    let medium = |phase: &str| {
+        let body = format!(
+            r#"<shape type="cube"><bsdf type="null"/><medium type="homogeneous" name="interior">{phase}</medium></shape>"#
+        );
+        let lookat = r#"<lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/>"#;
+        xml("phase.xml", &with_camera(lookat, &body), &[]).map(|s| s.media()[0].phase)
+    };
+    assert_eq!(medium(r#"<phase type="rayleigh"/>"#).unwrap(), PhaseFunction::Rayleigh);
+    let named = r#"<phase type="blendphase"><float name="weight" value="0.25"/>
+        <phase name="phase_1" type="hg"><float name="g" value="-0.3"/></phase>
+        <phase name="phase_0" type="rayleigh"/></phase>"#;
+    let expected = PhaseFunction::Blend {
+        weight: 0.25,
+        first: Lobe::HenyeyGreenstein { g: -0.3 },
+        second: Lobe::Rayleigh,
+    };
+    assert_eq!(medium(named).unwrap(), expected);
+    let unnamed = r#"<phase type="blendphase"><phase type="isotropic"/><phase type="hg"/></phase>"#;
+    let expected = PhaseFunction::Blend {
+        weight: 0.5,
+        first: Lobe::Isotropic,
+        second: Lobe::HenyeyGreenstein { g: 0.8 },
+    };
+    assert_eq!(medium(unnamed).unwrap(), expected);
+    for (phase, says) in [
+        (
+            r#"<phase type="blendphase"><phase type="hg"/></phase>"#,
+            "exactly two <phase> elements, not 1",
+        ),
+        (
+            r#"<phase type="blendphase"><float name="weight" value="1.5"/><phase type="hg"/><phase type="hg"/></phase>"#,
+            "blendphase weight 1.5 must lie in [0, 1]",
+        ),
+        (
+            r#"<phase type="blendphase"><phase type="hg"/><phase type="blendphase"><phase type="hg"/><phase type="hg"/></phase></phase>"#,
+            "a blendphase inside a blendphase is not supported",
+        ),
+        (r#"<phase type="lut"/>"#, "use isotropic, hg, rayleigh or blendphase"),
+    ] {
+        let e = medium(phase).unwrap_err().to_string();
+        assert!(e.contains(says), "{phase}: {e}");
+    }
+    // TOML names the same phases.
+    let toml = |phase: &str| {
+        let text = format!(
+            "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\nresolution = [8, 8]\n\
+             [media.fog]\ntype = \"homogeneous\"\nphase = {phase}\n"
+        );
+        load_str(&temp_dir().join("phase.toml"), &text, &[]).map(|s| s.media()[0].phase)
+    };
+    let blend = r#"{ type = "blendphase", weight = 0.2, phases = [{ type = "hg", g = 0.85 }, { type = "rayleigh" }] }"#;
+    let expected = PhaseFunction::Blend {
+        weight: 0.2,
+        first: Lobe::HenyeyGreenstein { g: 0.85 },
+        second: Lobe::Rayleigh,
+    };
+    assert_eq!(toml(blend).unwrap(), expected);
+    let e = toml(r#"{ type = "rayleigh", g = 0.3 }"#).unwrap_err().to_string();
+    assert!(e.contains("`g` does not apply to rayleigh phase functions"), "{e}");
+    let e = toml(r#"{ type = "blendphase", phases = [{ type = "hg", g = 0.5 }] }"#).unwrap_err();
+    assert!(e.to_string().contains("blendphase blends exactly two phases"), "{e}");
+}

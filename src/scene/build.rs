@@ -15,7 +15,7 @@ use crate::math::{Frame, Spectrum};
 use crate::media::{
     AlbedoField, DensityField, Grid, Heterogeneous, Medium, MediumKind, VdbGrid, VolGrid,
 };
-use crate::phase::PhaseFunction;
+use crate::phase::{Lobe, PhaseFunction};
 use crate::shapes::{Cuboid, Disk, Geometry, Mesh, Parallelogram, Sphere};
 use crate::tracking::Tracker;
 use crate::transform::Transform;
@@ -663,24 +663,49 @@ fn texture(cx: &Ctx<'_>, name: &str, d: Option<&TextureDesc>) -> Result<Texture>
 }
 
 fn phase(cx: &Ctx<'_>, d: Option<&PhaseDesc>) -> Result<PhaseFunction> {
-    match d {
-        None => Ok(PhaseFunction::Isotropic),
-        Some(p) if p.kind == "isotropic" => {
-            cx.only("isotropic phase functions", &[("g", p.g.is_some())])?;
-            Ok(PhaseFunction::Isotropic)
+    let Some(p) = d else { return Ok(PhaseFunction::Isotropic) };
+    if p.kind != "blendphase" {
+        return Ok(lobe(cx, p)?.alone());
+    }
+    cx.only("blendphase", &[("g", p.g.is_some())])?;
+    let weight = p.weight.unwrap_or(0.5);
+    if !(0.0..=1.0).contains(&weight) {
+        return cx.err(format!("blendphase weight {weight} must lie in [0, 1]"));
+    }
+    match p.phases.as_deref() {
+        Some([first, second]) => {
+            Ok(PhaseFunction::Blend { weight, first: lobe(cx, first)?, second: lobe(cx, second)? })
         }
-        Some(p) if p.kind == "hg" => {
+        _ => cx.err("blendphase blends exactly two phases: give `phases = [{ ... }, { ... }]`"),
+    }
+}
+
+/// A phase function that is not a blend.
+fn lobe(cx: &Ctx<'_>, p: &PhaseDesc) -> Result<Lobe> {
+    let blend = [("weight", p.weight.is_some()), ("phases", p.phases.is_some())];
+    match p.kind.as_str() {
+        "isotropic" | "rayleigh" => {
+            cx.only(
+                &format!("{} phase functions", p.kind),
+                &[&[("g", p.g.is_some())], &blend[..]].concat(),
+            )?;
+            Ok(if p.kind == "isotropic" { Lobe::Isotropic } else { Lobe::Rayleigh })
+        }
+        "hg" => {
+            cx.only("hg phase functions", &blend)?;
             let g = cx.required("g", &p.g)?;
             if !(g > -1.0 && g < 1.0) {
                 return cx.err(format!("HG g = {g} must lie strictly between -1 and 1"));
             }
-            Ok(if g == 0.0 {
-                PhaseFunction::Isotropic
-            } else {
-                PhaseFunction::HenyeyGreenstein { g }
-            })
+            Ok(if g == 0.0 { Lobe::Isotropic } else { Lobe::HenyeyGreenstein { g } })
         }
-        Some(p) => cx.err(format!("unknown phase function `{}`; use isotropic or hg", p.kind)),
+        "blendphase" => cx.err(
+            "a blendphase inside a blendphase is not supported; blend two \
+                                isotropic, hg or rayleigh phases",
+        ),
+        other => cx.err(format!(
+            "unknown phase function `{other}`; use isotropic, hg, rayleigh or blendphase"
+        )),
     }
 }
 

@@ -184,7 +184,7 @@ impl MediumDesc {
 impl PhaseDesc {
     /// Henyey-Greenstein with mean cosine `g`.
     pub fn hg(g: f32) -> Self {
-        Self { kind: "hg".into(), g: Some(g) }
+        Self { kind: "hg".into(), g: Some(g), ..Self::default() }
     }
 }
 

@@ -389,11 +389,15 @@ pub enum AlbedoDesc {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct PhaseDesc {
-    /// "isotropic" or "hg".
+    /// "isotropic", "hg", "rayleigh" or "blendphase".
     #[serde(rename = "type")]
     pub kind: String,
     /// HG mean cosine.
     pub g: Option<f32>,
+    /// Blendphase: the second phase's share, in [0, 1] (default 0.5).
+    pub weight: Option<f32>,
+    /// Blendphase: the two phases blended (isotropic, hg or rayleigh), at weight 0 and 1.
+    pub phases: Option<Vec<PhaseDesc>>,
 }
 
 /// `[[lights]]`.
