@@ -57,7 +57,7 @@ impl PixelFilter {
         }
     }
 
-    /// The filter's weight at offset `x` from a pixel's centre (1 at the centre).
+    /// The filter's weight at offset `x` from a pixel's centre (largest at the centre).
     pub fn eval(&self, x: f32) -> f32 {
         let r = self.radius();
         if x.abs() > r {
