@@ -287,6 +287,10 @@ fn defaults_overrides_and_refs() {
     // -D may also define what no <default> declares.
     let text = REFS.replace("<default name=\"r\" value=\"0.5\"/>", "");
     assert!(xml("refs.xml", &text, &[("r", "1")]).is_ok());
+    // Mitsuba's differentiable volumetric path tracer renders the image volpath renders.
+    let prb = REFS.replace("type=\"volpathmis\"", "type=\"prbvolpath\"");
+    assert_ne!(prb, REFS);
+    assert_eq!(xml("prb.xml", &prb, &[]).unwrap().settings().max_depth, Some(8));
 }
 
 #[test]

@@ -14,7 +14,7 @@ use glam::Vec3;
 use std::rc::Rc;
 
 /// The plugins the sensor and integrator take, for messages.
-const INTEGRATORS: &str = "path, volpath, volpathmis or moment";
+const INTEGRATORS: &str = "path, volpath, volpathmis, prb, prbvolpath or moment";
 
 pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
     let (mut sensor, mut integrator) = (None, None);
@@ -336,8 +336,9 @@ fn integrator(o: &Rc<Object>) -> Result<Integrator> {
                 _ => Err(p.err("a moment integrator wraps exactly one <integrator>")),
             };
         }
-        "path" => "path",
-        "volpath" | "volpathmis" => "volpath",
+        // The differentiable ones estimate the same image as their plain twins.
+        "path" | "prb" => "path",
+        "volpath" | "volpathmis" | "prbvolpath" => "volpath",
         other => {
             return Err(
                 p.err(format!("the `{other}` integrator is not supported; use {INTEGRATORS}"))
