@@ -405,7 +405,18 @@ impl Scene {
         let triangles: usize = self.shapes.iter().map(Geometry::primitive_count).sum();
         let _ = writeln!(s, "scene    {}", self.path.display());
         let [w, h] = self.camera.resolution();
-        let _ = writeln!(s, "camera   {w}x{h}, in medium {}", self.medium_name(self.camera_medium));
+        let filter = match self.camera.filter() {
+            crate::filter::PixelFilter::Box => "box".to_string(),
+            crate::filter::PixelFilter::Tent { radius } => format!("tent (radius {radius})"),
+            crate::filter::PixelFilter::Gaussian { stddev } => {
+                format!("gaussian (stddev {stddev})")
+            }
+        };
+        let _ = writeln!(
+            s,
+            "camera   {w}x{h}, in medium {}, pixel filter {filter}",
+            self.medium_name(self.camera_medium)
+        );
         let _ = writeln!(s, "shapes   {} ({} primitives)", self.shapes.len(), triangles);
         if !b.is_empty() {
             let _ = writeln!(s, "bounds   {:?} .. {:?}", b.min.to_array(), b.max.to_array());
@@ -443,8 +454,11 @@ impl Scene {
         let depth = self.settings.max_depth.map_or("unlimited".to_string(), |d| d.to_string());
         let _ = writeln!(
             s,
-            "render   {} spp, max depth {depth}, rr depth {}, seed {}",
-            self.settings.spp, self.settings.rr_depth, self.settings.seed
+            "render   {} spp, max depth {depth}, rr depth {}, seed {}{}",
+            self.settings.spp,
+            self.settings.rr_depth,
+            self.settings.seed,
+            if self.settings.hide_emitters { ", emitters seen directly hidden" } else { "" }
         );
         s
     }
