@@ -1018,6 +1018,7 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
     // roulette alone, are the only candidate (so both kinds of guided tiles are rendered
     // whatever the pilots choose).
     let without_roulette = Components { roulette: false, ..Components::FULL };
+    let mut tails = [0, 0];
     for (name, text) in SCENES {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
@@ -1026,7 +1027,10 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
             let selection = r.selection.expect("adaptive guiding reports its choice");
             let what = format!("{name}, adaptive {} against unguided", selection.components);
             assert_quadrants_agree(quadrant_means(&r.film), reference, 4.5, &what);
-            let candidates = if requested.roulette && requested != Components::ROULETTE {
+            // Roulette alone is ranked beside more only by a light-tailed pilot.
+            let heavy = selection.unguided_tail_share >= zerovar::render::TAIL_LIMIT;
+            tails[usize::from(heavy)] += 1;
+            let candidates = if requested.roulette && requested != Components::ROULETTE && !heavy {
                 vec![requested.name(), "rr".to_string()]
             } else {
                 vec![requested.name()]
@@ -1042,6 +1046,8 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
             );
         }
     }
+    println!("pilots light-tailed / heavy-tailed: {tails:?}");
+    assert!(tails[0] > 0 && tails[1] > 0, "both kinds of pilot must be seen: {tails:?}");
 }
 
 #[test]

@@ -32,6 +32,7 @@ pub use options::{
     parse_guiding,
 };
 pub use select::Selection;
+pub use select::TAIL_LIMIT;
 pub use settings::{SETTINGS, Setting, SettingError, TRAIN_BUDGET, setting};
 pub use stats::{RenderStats, TrainingStats};
 pub use training::{TrainingReport, TrainingStop};
@@ -228,19 +229,12 @@ const EARLY_PILOT_PASSES: u32 = 2;
 /// docs/experiments.md).
 const EARLY_MIN_GAIN: f64 = 1.1;
 
-/// The share of the unguided pilot's relative variance held by its 1% of pixels with the most
-/// (`Selection::unguided_tail_share`) from which the early look cannot stop training: training
-/// goes on and the pilot after it decides. There a few rare bright paths make the error, which a
-/// 4-spp pilot mostly misses, so its gains scatter by orders of magnitude from seed to seed;
-/// light-tailed images hold a few percent there, their pixels' own sampling noise. Going on
-/// wrongly costs at most the guided part of training's share; stopping wrongly has cost ten
-/// times the error and more (see docs/experiments.md).
-const EARLY_TAIL_LIMIT: f64 = 0.45;
-
 /// Whether the early look's pilot can be trusted to find no gain: its unguided samples are not
-/// heavy-tailed.
+/// heavy-tailed ([`select::TAIL_LIMIT`]). Where they are, training goes on and the pilot after
+/// it decides: going on wrongly costs at most the guided part of training's share; stopping
+/// wrongly has cost ten times the error and more (see docs/experiments.md).
 fn trusted(early: &Selection) -> bool {
-    early.unguided_tail_share < EARLY_TAIL_LIMIT
+    early.unguided_tail_share < select::TAIL_LIMIT
 }
 
 /// Whether the early look's `selection` stops training: a trusted pilot found no gain worth it

@@ -126,6 +126,15 @@ pub(super) struct Choice {
     pub selection: Selection,
 }
 
+/// The share of the unguided pilot's relative variance held by its 1% of pixels with the most
+/// (`Selection::unguided_tail_share`) from which the pilot is heavy-tailed: a few rare bright
+/// paths make the error, which a pilot of a few spp mostly misses, so its gains scatter by
+/// orders of magnitude from seed to seed. Light-tailed images hold a few percent there, their
+/// pixels' own sampling noise; the bench's heavy-tailed ones 0.57 and more (see
+/// docs/experiments.md). A heavy-tailed pilot neither stops training early nor ranks roulette
+/// alone against the requested components.
+pub const TAIL_LIMIT: f64 = 0.45;
+
 /// The fewest samples per pixel of the pilot that chooses the tiles to render guided: with
 /// fewer, its variance estimates are so noisy that the choice follows their noise, most of
 /// all where samples are heavy-tailed (see docs/experiments.md).
@@ -178,10 +187,7 @@ pub(super) fn pilot(
     };
     let halves = |k: usize, guide: Components| Some([run(k, guide, 0)?, run(k, guide, 1)?]);
     let unguided = halves(0, Components::OFF)?;
-    let mut guided = Vec::with_capacity(strategies.len());
-    for (k, &c) in strategies.iter().enumerate() {
-        guided.push(halves(k + 1, c)?);
-    }
+    let mut guided = vec![halves(1, strategies[0])?];
     // Relative variance needs each pixel's value, and a pilot's own mean is no good for it: an
     // outlier inflates the mean it is divided by. The training images' (blurred) estimates
     // are; without them (a loaded field), the first guided pilot's, blurred the same way.
@@ -193,6 +199,15 @@ pub(super) fn pilot(
             &own
         }
     };
+    // A heavy-tailed pilot cannot rank the candidates: its gains for full guiding scattered
+    // from 0.83 to 3.3 over three seeds of one scene, and roulette alone won on the low one
+    // at 0.57x full guiding's error (docs/experiments.md). There the requested components
+    // stand alone.
+    let tail = tail_share(&unguided, estimate);
+    let strategies = if tail < TAIL_LIMIT { strategies } else { strategies[..1].to_vec() };
+    for (k, &c) in strategies.iter().enumerate().skip(1) {
+        guided.push(halves(k + 1, c)?);
+    }
     let columns = w.div_ceil(TILE) as usize;
     let choices = guided
         .iter()
@@ -203,7 +218,7 @@ pub(super) fn pilot(
         })
         .collect();
     let mut best = pick(choices);
-    best.selection.unguided_tail_share = tail_share(&unguided, estimate);
+    best.selection.unguided_tail_share = tail;
     best.selection.seconds = start.elapsed().as_secs_f64();
     Some(best)
 }
