@@ -199,10 +199,8 @@ pub(super) fn pilot(
             &own
         }
     };
-    // A heavy-tailed pilot cannot rank the candidates: its gains for full guiding scattered
-    // from 0.83 to 3.3 over three seeds of one scene, and roulette alone won on the low one
-    // at 0.57x full guiding's error (docs/experiments.md). There the requested components
-    // stand alone.
+    // A heavy-tailed pilot cannot rank the candidates, its gains scattering from seed to seed
+    // (docs/experiments.md): there the requested components stand alone.
     let tail = tail_share(&unguided, estimate);
     let strategies = if tail < TAIL_LIMIT { strategies } else { strategies[..1].to_vec() };
     for (k, &c) in strategies.iter().enumerate().skip(1) {
