@@ -101,11 +101,11 @@ impl PixelFilter {
     /// An offset in `[lo, hi]` with density proportional to the filter there: uniform
     /// proposals accepted with probability `f(x) / f(0)`.
     fn offset(&self, lo: f32, hi: f32, sampler: &mut Sampler) -> f32 {
-        let mut x = 0.0;
+        let (mut x, peak) = (0.0, self.eval(0.0));
         for _ in 0..MAX_TRIALS {
             let [u, v] = sampler.next_2d().to_array();
             x = (lo + u * (hi - lo)).clamp(lo, hi);
-            if v < self.eval(x) / self.eval(0.0) {
+            if v * peak < self.eval(x) {
                 return x;
             }
         }

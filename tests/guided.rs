@@ -669,11 +669,15 @@ position = [1.5, 2.5, 1]
 intensity = 15
 "#;
 
-/// The camera and a spot light in fog filling a closed room: extra collisions aim at the light
-/// (equiangular) and directions at its glow (`guided::halo`). A little clear air around the
-/// light keeps unguided next-event estimates (`1 / r^2` from a vertex at distance `r`) of
-/// finite variance, so that the unguided reference's standard error means something.
-const SPOT_FOG: &str = r#"
+/// The camera and a spot light in a medium named `fog` filling a closed room, around the
+/// `[media.fog]` table given: extra collisions aim at the light (equiangular) and directions
+/// at its glow (`guided::halo`). A little clear air around the light keeps unguided
+/// next-event estimates (`1 / r^2` from a vertex at distance `r`) of finite variance, so that
+/// the unguided reference's standard error means something.
+macro_rules! spot_room {
+    ($medium:literal) => {
+        concat!(
+            r#"
 medium = "fog"
 
 [camera]
@@ -682,13 +686,9 @@ target = [0, 0.6, -1]
 fov = 60
 resolution = [12, 10]
 medium = "fog"
-
-[media.fog]
-type = "homogeneous"
-sigma_t = 0.4
-albedo = 0.9
-phase = { type = "hg", g = 0.3 }
-
+"#,
+            $medium,
+            r#"
 [[shapes]]
 type = "cube"
 transform = [{ scale = [1.5, 1, 2] }, { translate = [0, 1, 0] }]
@@ -708,49 +708,36 @@ position = [0.3, 1.8, -0.6]
 target = [0, 0, -1]
 intensity = 4
 cutoff_angle = 25
-"#;
+"#
+        )
+    };
+}
 
-/// `SPOT_FOG` in heterogeneous haze (a noise density varying about fivefold over the room):
-/// guided flights there take their extra collisions towards the spot light in the
+/// The spot-lit room in homogeneous fog.
+const SPOT_FOG: &str = spot_room!(
+    r#"
+[media.fog]
+type = "homogeneous"
+sigma_t = 0.4
+albedo = 0.9
+phase = { type = "hg", g = 0.3 }
+"#
+);
+
+/// The spot-lit room in heterogeneous haze (a noise density varying about fivefold over the
+/// room): guided flights there take their extra collisions towards the spot light in the
 /// null-collision form.
-const SPOT_HAZE: &str = r#"
-medium = "haze"
-
-[camera]
-origin = [0, 1, 1.8]
-target = [0, 0.6, -1]
-fov = 60
-resolution = [12, 10]
-medium = "haze"
-
-[media.haze]
+const SPOT_HAZE: &str = spot_room!(
+    r#"
+[media.fog]
 type = "noise"
 scale = 0.8
 albedo = 0.9
 phase = { type = "hg", g = 0.3 }
 noise = { frequency = 3, octaves = 2, seed = 3, amplitude = 0.8, threshold = -1.2, sharpness = 0.5 }
 transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = [3, 2, 4] }, { translate = [0, 1, 0] }]
-
-[[shapes]]
-type = "cube"
-transform = [{ scale = [1.5, 1, 2] }, { translate = [0, 1, 0] }]
-flip_normals = true
-bsdf = { type = "diffuse", reflectance = [0.6, 0.5, 0.4] }
-
-[[shapes]]
-type = "sphere"
-center = [0.3, 1.8, -0.6]
-radius = 0.15
-bsdf = { type = "null" }
-exterior = "haze"
-
-[[lights]]
-type = "spot"
-position = [0.3, 1.8, -0.6]
-target = [0, 0, -1]
-intensity = 4
-cutoff_angle = 25
-"#;
+"#
+);
 
 const CLOUD: &str = r#"
 [camera]

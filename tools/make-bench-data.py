@@ -24,23 +24,8 @@ OUT = pathlib.Path(__file__).resolve().parent.parent / "scenes" / "data"
 
 
 def value_noise(n, cells, rng):
-    """Smooth noise on an n^3 grid: random values on a (cells+1)^3 lattice, interpolated by
-    a smoothstep."""
-    lattice = rng.random((cells + 1,) * 3)
-    x = np.linspace(0, cells, n, endpoint=False) + 0.5 * cells / n
-    i = np.minimum(x.astype(int), cells - 1)
-    f = x - i
-    f = f * f * (3 - 2 * f)
-    out = np.zeros((n, n, n))
-    for dz in (0, 1):
-        wz = f if dz else 1 - f
-        for dy in (0, 1):
-            wy = f if dy else 1 - f
-            for dx in (0, 1):
-                wx = f if dx else 1 - f
-                v = lattice[np.ix_(i + dz, i + dy, i + dx)]
-                out += v * wz[:, None, None] * wy[None, :, None] * wx[None, None, :]
-    return out
+    """Smooth noise on an n^3 grid with `cells` lattice cells along each axis (box_noise)."""
+    return box_noise((n, n, n), (cells, cells, cells), rng)
 
 
 def puff(n, seed):

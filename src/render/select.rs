@@ -130,9 +130,9 @@ pub(super) struct Choice {
 /// (`Selection::unguided_tail_share`) from which the pilot is heavy-tailed: a few rare bright
 /// paths make the error, which a pilot of a few spp mostly misses, so its gains scatter by
 /// orders of magnitude from seed to seed. Light-tailed images hold a few percent there, their
-/// pixels' own sampling noise; the bench's heavy-tailed ones 0.57 and more (see
-/// docs/experiments.md). A heavy-tailed pilot neither stops training early nor ranks roulette
-/// alone against the requested components.
+/// pixels' own sampling noise, so the limit sits far from both kinds (see docs/experiments.md).
+/// A heavy-tailed pilot neither stops training early nor ranks roulette alone against the
+/// requested components.
 pub const TAIL_LIMIT: f64 = 0.45;
 
 /// The fewest samples per pixel of the pilot that chooses the tiles to render guided: with
