@@ -5,8 +5,9 @@
 //! Its rays start on the near clipping plane and reach the far one, as Mitsuba's do: for a
 //! camera inside a medium, the near plane decides how much of it lies before the first ray.
 
-use crate::filter::PixelFilter;
+use crate::filter::{FilterTable, PixelFilter};
 use crate::math::Ray;
+use crate::rng::Sampler;
 use crate::transform::Transform;
 use glam::{Vec2, Vec3A};
 
@@ -32,7 +33,7 @@ pub struct Camera {
     near: f32,
     far: f32,
     /// How a pixel's samples spread over the film.
-    filter: PixelFilter,
+    filter: FilterTable,
 }
 
 impl Camera {
@@ -46,18 +47,26 @@ impl Camera {
             FovAxis::Y => Vec2::new(t * aspect, t),
         };
         let origin = to_world.point(Vec3A::ZERO);
-        let (near, far, filter) = (0.0, f32::INFINITY, PixelFilter::Box);
+        let filter = FilterTable::new(PixelFilter::Box).expect("the box filter");
+        let (near, far) = (0.0, f32::INFINITY);
         Self { to_world, origin, tan_half, resolution, near, far, filter }
     }
 
-    /// The camera with pixel filter `filter` (a box by default).
-    pub fn with_filter(self, filter: PixelFilter) -> Self {
+    /// The camera with the pixel filter of `filter` (a box by default).
+    pub fn with_filter(self, filter: FilterTable) -> Self {
         Self { filter, ..self }
     }
 
     /// The pixel filter.
     pub fn filter(&self) -> PixelFilter {
-        self.filter
+        self.filter.filter()
+    }
+
+    /// A film position for a sample of `pixel`, drawn from the pixel filter, and the sample's
+    /// weight (one but for filters with negative lobes; see [`FilterTable::film_sample`]).
+    #[inline]
+    pub fn film_sample(&self, pixel: [u32; 2], sampler: &mut Sampler) -> (Vec2, f32) {
+        self.filter.film_sample(pixel, self.resolution, sampler)
     }
 
     /// The camera with clipping planes `near` and `far` (distances along the view axis, with

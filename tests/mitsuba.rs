@@ -341,6 +341,20 @@ fn mitsuba_u_tent_filter() {
     validate("u-tent", 1024);
 }
 
+/// The Mitchell-Netravali filter at Mitsuba's defaults: negative lobes, signed sample weights.
+/// At 4096 spp: at 1024, dark pixels a few pixels from the light, which only its lobes' tips
+/// reach, saw no light at all (an estimate of 0 with no variance against Mitsuba's -2e-5).
+#[test]
+fn mitsuba_w_mitchell_filter() {
+    validate("w-mitchell", 4096);
+}
+
+/// A Lanczos filter of 2 lobes, cut at the image's edges.
+#[test]
+fn mitsuba_x_lanczos_filter() {
+    validate("x-lanczos", 1024);
+}
+
 /// `blendphase` of an HG lobe and a Rayleigh one, its two phases written out of their names'
 /// order (Mitsuba takes them as written), lit from behind the medium.
 #[test]

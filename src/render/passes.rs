@@ -263,9 +263,9 @@ pub(super) fn camera_sample<C: RadianceCache>(
     let pixel = u64::from(y) * u64::from(scene.camera.resolution()[0]) + u64::from(x);
     let mut sampler = Sampler::new(seed, pixel, u64::from(s));
     let camera = &scene.camera;
-    let film = camera.filter().film_position([x, y], camera.resolution(), &mut sampler);
+    let (film, weight) = camera.film_sample([x, y], &mut sampler);
     let start = walk::PathStart::camera(scene, film);
-    walk::radiance(settings, scene, start, ctx, &mut sampler, counters)
+    walk::radiance(settings, scene, start, ctx, &mut sampler, counters) * weight
 }
 
 /// Merges a pass's largest samples into `largest` and, for the firefly diagnostic's replays,

@@ -9,7 +9,7 @@ use crate::bsdf::{
     RoughDielectric, RoughPlastic, Texture, Wrap, srgb_to_linear,
 };
 use crate::camera::Camera;
-use crate::filter::PixelFilter;
+use crate::filter::{FilterTable, PixelFilter};
 use crate::lights::{EnvMap, Light};
 use crate::math::{Frame, Spectrum};
 use crate::media::{
@@ -85,14 +85,25 @@ fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
         PixelFilter::Box => ("", 1.0),
         PixelFilter::Tent { radius } => ("tent radius", radius),
         PixelFilter::Gaussian { stddev } => ("gaussian stddev", stddev),
+        PixelFilter::Mitchell { .. } => ("", 1.0),
+        PixelFilter::Lanczos { lobes } => ("lanczos lobes", lobes as f32),
     };
     if !(width > 0.0 && width <= MAX_FILTER_WIDTH) {
         return cx.err(format!(
             "pixel filter: {what} {width} must be above 0 and at most {MAX_FILTER_WIDTH} pixels"
         ));
     }
+    if let PixelFilter::Mitchell { b, c } = cam.filter
+        && !(b.is_finite() && c.is_finite())
+    {
+        return cx.err(format!("pixel filter: mitchell B {b} and C {c} must be finite numbers"));
+    }
+    let filter = match FilterTable::new(cam.filter) {
+        Ok(f) => f,
+        Err(why) => return cx.err(format!("pixel filter: {why}")),
+    };
     let camera = Camera::new(to_world, cam.fov, cam.fov_axis, resolution);
-    Ok(camera.with_clip(cam.near_clip, cam.far_clip).with_filter(cam.filter))
+    Ok(camera.with_clip(cam.near_clip, cam.far_clip).with_filter(filter))
 }
 
 /// The file being built and the element being looked at, for error messages.

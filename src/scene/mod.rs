@@ -405,13 +405,7 @@ impl Scene {
         let triangles: usize = self.shapes.iter().map(Geometry::primitive_count).sum();
         let _ = writeln!(s, "scene    {}", self.path.display());
         let [w, h] = self.camera.resolution();
-        let filter = match self.camera.filter() {
-            crate::filter::PixelFilter::Box => "box".to_string(),
-            crate::filter::PixelFilter::Tent { radius } => format!("tent (radius {radius})"),
-            crate::filter::PixelFilter::Gaussian { stddev } => {
-                format!("gaussian (stddev {stddev})")
-            }
-        };
+        let filter = self.camera.filter().describe();
         let _ = writeln!(
             s,
             "camera   {w}x{h}, in medium {}, pixel filter {filter}",

@@ -257,6 +257,10 @@ fn film(o: &Rc<Object>) -> Result<([i64; 2], PixelFilter)> {
     Ok((resolution, filter))
 }
 
+/// The most lobes of a Lanczos filter: wider ones accept too few of the sampler's proposals
+/// (see `filter::MIN_ACCEPTANCE`).
+const MAX_LANCZOS_LOBES: u32 = 8;
+
 /// Mitsuba's pixel filter where a film names none.
 const MITSUBA_FILTER: PixelFilter = PixelFilter::Gaussian { stddev: 0.5 };
 
@@ -270,7 +274,8 @@ fn positive(p: &Props<'_>, name: &'static str, default: f32) -> Result<f32> {
     }
 }
 
-/// An `<rfilter>`: `box` (radius 0.5 only), `tent` (`radius`) or `gaussian` (`stddev`).
+/// An `<rfilter>`: `box` (radius 0.5 only), `tent` (`radius`), `gaussian` (`stddev`),
+/// `mitchell` (`B`, `C`), `catmullrom` or `lanczos` (`lobes`).
 fn rfilter(o: &Rc<Object>) -> Result<PixelFilter> {
     let p = Props::new(o);
     let filter = match o.kind.as_str() {
@@ -285,10 +290,27 @@ fn rfilter(o: &Rc<Object>) -> Result<PixelFilter> {
         },
         "tent" => PixelFilter::Tent { radius: positive(&p, "radius", 1.0)? },
         "gaussian" => PixelFilter::Gaussian { stddev: positive(&p, "stddev", 0.5)? },
+        "mitchell" => {
+            let (b, c) = (p.float("B")?.unwrap_or(1.0 / 3.0), p.float("C")?.unwrap_or(1.0 / 3.0));
+            PixelFilter::Mitchell { b, c }
+        }
+        "catmullrom" => PixelFilter::Mitchell { b: 0.0, c: 0.5 },
+        "lanczos" => {
+            let lobes = p.integer("lobes")?.unwrap_or(3);
+            match u32::try_from(lobes).ok().filter(|l| (1..=MAX_LANCZOS_LOBES).contains(l)) {
+                Some(lobes) => PixelFilter::Lanczos { lobes },
+                None => {
+                    return Err(p.err(format!(
+                        "lanczos lobes {lobes}: give 1 to {MAX_LANCZOS_LOBES} (the radius in \
+                         pixels)"
+                    )));
+                }
+            }
+        }
         other => {
             return Err(p.err(format!(
-                "the `{other}` pixel filter is not supported; use box, tent or gaussian (the \
-                 filters without negative lobes)"
+                "the `{other}` pixel filter is not supported; use box, tent, gaussian, \
+                 mitchell, catmullrom or lanczos"
             )));
         }
     };
@@ -296,10 +318,35 @@ fn rfilter(o: &Rc<Object>) -> Result<PixelFilter> {
     Ok(filter)
 }
 
+/// A `<sampler>`: its sample count and seed. Mitsuba's samplers differ in how they place
+/// their samples, not in the image they converge to, so zerovar draws independent samples
+/// for each of them; the count is rounded as Mitsuba 3.9 rounds it for that sampler (up to a
+/// square for `stratified`, to a `k x ceil(n / k)` grid with `k = floor(sqrt(n))` for
+/// `multijitter`, to the square of a prime for `orthogonal`, to a power of 4 from 4 on for
+/// `ldsampler`), so a scene's default budget is the sample count Mitsuba renders.
 fn sampler(o: &Rc<Object>) -> Result<RenderDesc> {
     let p = Props::new(o);
-    if o.kind != "independent" {
-        return Err(p.err("zerovar has only the `independent` sampler"));
+    let round: fn(u32) -> Option<u32> = match o.kind.as_str() {
+        "independent" => Some,
+        "stratified" => |n| next_square(n, |_| true),
+        "multijitter" => |n| {
+            let k = n.isqrt();
+            k.checked_mul(n.div_ceil(k))
+        },
+        "orthogonal" => |n| next_square(n, is_prime),
+        "ldsampler" => |n| (1..16).map(|e| 4u32.pow(e)).find(|&p| p >= n),
+        other => {
+            return Err(p.err(format!(
+                "the `{other}` sampler is not supported; use independent, stratified, \
+                 multijitter, orthogonal or ldsampler"
+            )));
+        }
+    };
+    if matches!(o.kind.as_str(), "stratified" | "multijitter" | "orthogonal") {
+        p.boolean("jitter")?;
+    }
+    if o.kind == "orthogonal" {
+        p.float("strength")?;
     }
     let spp = p.integer("sample_count")?.unwrap_or(4);
     let seed = p.integer("seed")?.unwrap_or(0);
@@ -308,11 +355,31 @@ fn sampler(o: &Rc<Object>) -> Result<RenderDesc> {
         spp: u32::try_from(spp)
             .ok()
             .filter(|s| *s > 0)
-            .ok_or_else(|| p.err(format!("sample_count {spp} must be at least 1")))?,
+            .ok_or_else(|| p.err(format!("sample_count {spp} must be at least 1")))
+            .and_then(|s| {
+                round(s).filter(|r| *r <= MAX_SAMPLE_COUNT).ok_or_else(|| {
+                    p.err(format!(
+                        "sample_count {spp} rounds past {MAX_SAMPLE_COUNT} for the `{}` sampler",
+                        o.kind
+                    ))
+                })
+            })?,
         seed: u64::try_from(seed)
             .map_err(|_| p.err(format!("seed {seed} must be non-negative")))?,
         ..RenderDesc::default()
     })
+}
+
+/// The most samples per pixel a `<sampler>` may ask for once rounded.
+const MAX_SAMPLE_COUNT: u32 = 1 << 30;
+
+/// The smallest `k * k >= n` with `keep(k)`.
+fn next_square(n: u32, keep: fn(u32) -> bool) -> Option<u32> {
+    (1u32..=1 << 15).find(|&k| k * k >= n && keep(k)).map(|k| k * k)
+}
+
+fn is_prime(k: u32) -> bool {
+    k >= 2 && (2..).take_while(|d| d * d <= k).all(|d| !k.is_multiple_of(d))
 }
 
 /// What an `<integrator>` says.
