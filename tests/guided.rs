@@ -18,6 +18,7 @@ use zerovar::render::{
 use zerovar::rng::Sampler;
 use zerovar::scene::Scene;
 use zerovar::stats::Counters;
+use zerovar::tracking::Tracker;
 use zerovar_guiding::PathRecorder;
 use zerovar_testkit::{MeanEstimate, chi2_1d, integrate_1d};
 
@@ -277,6 +278,7 @@ fn guided_flights_weigh_both_collisions_by_their_densities() {
         for _ in 0..100_000 {
             let f = zerovar::guided::distance::guided_flight(
                 &medium,
+                Tracker::for_medium(&medium),
                 &ray,
                 t_max,
                 Spectrum::ONE,
@@ -376,6 +378,7 @@ fn heterogeneous_flights_share_point_lights_between_both_collisions_without_bias
         for _ in 0..flights {
             let flight = zerovar::guided::distance::guided_flight(
                 &medium,
+                Tracker::for_medium(&medium),
                 &ray,
                 t_max,
                 Spectrum::ONE,
@@ -446,8 +449,8 @@ impl RadianceCache for Fixed {
 
 #[test]
 fn null_collision_guided_weights_stay_bounded_and_unbiased() {
-    // A grey, albedo-1 heterogeneous medium: every weight of standard delta tracking is
-    // exactly 1, so no guided weight may exceed 1 / (1 - alpha), however wrong the cache (a
+    // A grey, albedo-1 heterogeneous medium: every weight of the analog trackers (delta,
+    // decomposition, and spectral tracking of either kind where all is grey) is exactly 1, so no guided weight may exceed 1 / (1 - alpha), however wrong the cache (a
     // per-event mixture compounds up to that factor at every null collision). The weighted
     // pass and scatter events estimate T and 1 - T, against ratio tracking.
     let medium = medium_of(
@@ -470,13 +473,19 @@ fn null_collision_guided_weights_stay_bounded_and_unbiased() {
     // that pushes every one through, and a sane one.
     let caches =
         [("scatter everywhere", 1e3, 1e-3), ("never scatter", 1e-3, 1e3), ("flat", 1.0, 1.0)];
-    for (what, inscattered, incident) in caches {
+    let trackers =
+        [Tracker::Delta, Tracker::Decomposition, Tracker::Spectral, Tracker::SpectralDecomposition];
+    for ((what, inscattered, incident), tracker) in
+        caches.into_iter().flat_map(|c| trackers.map(|t| (c, t)))
+    {
+        let what = format!("{what}, {tracker:?}");
         let mut cache = Fixed { inscattered, incident };
         let (mut pass, mut scatter) = (MeanEstimate::default(), MeanEstimate::default());
         let mut largest = 0.0f32;
         for _ in 0..200_000 {
             let f = zerovar::guided::distance::guided_flight(
                 &medium,
+                tracker,
                 &ray,
                 t_max,
                 Vec3A::ONE,
@@ -1121,11 +1130,12 @@ fn a_loaded_field_with_windows_on_the_image_so_far_converges_to_the_unguided_ima
     for (name, text) in [("fog", FOG), ("cloud", CLOUD)] {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
-        // Guided flights' own collisions too: their weights vary enough that the cloud's
-        // windows split (with standard tracking's weights they never do there).
+        // Guided flights' own collisions too, at the largest share: their weights vary
+        // enough that the cloud's windows split (with standard tracking's weights they never
+        // do there).
         let guiding = GuidingOptions {
             components: Components::FULL,
-            distance_alpha: 0.5,
+            distance_alpha: walk::MAX_ALPHA,
             train: TrainBudget::Passes(4),
             ..GuidingOptions::default()
         };
@@ -1342,6 +1352,7 @@ fn guided_flights_estimate_a_point_lights_single_scattering_without_bias() {
                 let f = if lit_grid {
                     zerovar::guided::distance::guided_flight(
                         &medium,
+                        Tracker::for_medium(&medium),
                         &ray,
                         t_max,
                         Spectrum::ONE,
@@ -1354,6 +1365,7 @@ fn guided_flights_estimate_a_point_lights_single_scattering_without_bias() {
                 } else {
                     zerovar::guided::distance::guided_flight(
                         &medium,
+                        Tracker::for_medium(&medium),
                         &ray,
                         t_max,
                         Spectrum::ONE,

@@ -115,7 +115,7 @@ fn heterogeneous_slabs_match_quadrature() {
         6.0,
         Spectrum::new(0.3, 1.0, 1.8),
     );
-    assert_eq!(Tracker::for_medium(&chroma), Tracker::SpectralDecomposition);
+    assert_eq!(Tracker::for_medium(&chroma), Tracker::Spectral);
     check(
         &chroma,
         10.0,

@@ -3,11 +3,12 @@
 //! (surface or infinity) as the remaining event.
 //!
 //! In heterogeneous media the transmittance is unknown, so guiding works in the
-//! null-collision form (seed notes, section 3.2): tentative collisions come from local majorants,
-//! and at each one the walk scatters with a probability of its choice, reweighting by
-//! `sigma_s / (mu P_s)` or `sigma_n / (mu (1 - P_s))`. The zero-variance choice weighs
-//! in-scattered radiance `sigma_s L_s` against the radiance the path finds by going on,
-//! `sigma_n L(x, w)`; mixing it with delta tracking's `sigma_t / mu` keeps it robust.
+//! null-collision form (seed notes, section 3.2), on top of the medium's own tracker: it draws
+//! its tentative collisions as always, and at each one that reads the density a steer
+//! (`tracking::Steer`) may scatter with a probability of its choice, the weight corrected by
+//! its ratio to the tracker's. The zero-variance choice weighs in-scattered radiance
+//! `sigma_s L_s` against the radiance the path finds by going on, `sigma_n L(x, w)`; mixing it
+//! with the tracker's own choice keeps it robust.
 //!
 //! In homogeneous media the ray's stretch inside the medium is cut into segments. For each
 //! segment the cache gives the conditional probability of colliding in it once the walk has
@@ -33,7 +34,10 @@ use crate::math::{Ray, Spectrum, is_grey, luminance, positive};
 use crate::media::{Medium, MediumKind};
 use crate::rng::Sampler;
 use crate::stats::Counters;
-use crate::tracking::{MediumRay, TrackedRay, ratio_tracking, transmittance_homogeneous};
+use crate::tracking::{
+    FlightEvent, MediumRay, Steer, Tentative, TrackedRay, Tracker, ratio_tracking,
+    sample_flight_along, steered_flight_along, transmittance_homogeneous,
+};
 
 /// Equal segments of the guided stretch in guided flights: one, so a flight costs one cache
 /// lookup. Finer segments follow the in-scattered light along the ray more closely, but the
@@ -464,6 +468,9 @@ impl GuidedDistance {
 }
 
 /// A guided free flight along `ray` within `(0, t_max)` in `medium`, for throughput `beta`.
+/// A heterogeneous medium's flight is its `tracker`'s (the scene's choice for it), steered at
+/// its tentative collisions where `alpha` is above 0 (see [`steered_flight_along`]);
+/// homogeneous media have closed forms of their own.
 ///
 /// With `extra_nee` (the scene's point and spot lights), a non-emissive medium also returns
 /// an [`ExtraCollision`]. In a homogeneous one it is placed by the cache's estimate of
@@ -486,6 +493,7 @@ impl GuidedDistance {
 #[allow(clippy::too_many_arguments)]
 pub fn guided_flight(
     medium: &Medium,
+    tracker: Tracker,
     ray: &Ray,
     t_max: f32,
     beta: Spectrum,
@@ -510,8 +518,9 @@ pub fn guided_flight(
         let extra = extra_nee
             .filter(|_| !medium.is_emissive())
             .and_then(|points| NullCollisionExtra::new(&r, ray, points));
-        let mut f =
-            null_collision_flight(medium, &r, ray, beta, alpha, lookup_u, cache, sampler, counters);
+        let mut f = tracked_flight(
+            medium, tracker, &r, ray, beta, alpha, lookup_u, cache, sampler, counters,
+        );
         if let Some(x) = extra {
             if let GuidedEvent::Scatter { t } = f.event {
                 f.delta_share = x.own_share(&r, t, counters);
@@ -529,7 +538,7 @@ pub fn guided_flight(
         // stretch cannot express: such rays keep the standard tracker.
         let f = crate::tracking::sample_flight(
             medium,
-            crate::tracking::Tracker::for_medium(medium),
+            Tracker::for_medium(medium),
             ray,
             t_max,
             beta,
@@ -537,8 +546,8 @@ pub fn guided_flight(
             counters,
         );
         let event = match f.event {
-            crate::tracking::FlightEvent::Scatter { t } => GuidedEvent::Scatter { t },
-            crate::tracking::FlightEvent::Escape => GuidedEvent::Pass,
+            FlightEvent::Scatter { t } => GuidedEvent::Scatter { t },
+            FlightEvent::Escape => GuidedEvent::Pass,
         };
         return GuidedFlight { emitted: f.emitted, ..GuidedFlight::new(event, f.weight, 1.0) };
     }
@@ -726,8 +735,11 @@ fn emissive_collision(
     GuidedFlight::new(GuidedEvent::Scatter { t }, w * sigma_s / (1.0 - p_absorb), gain)
 }
 
-/// Guided flight in the null-collision form along `r`, the part of `ray` inside a
-/// heterogeneous medium (`ray` itself places the cache lookups).
+/// Guided distance sampling in the null-collision form, as a steer of the medium's own tracker
+/// along the part of `ray` inside a heterogeneous medium (`ray` places the cache lookups): at
+/// each tentative collision the zero-variance choice weighs in-scattered radiance
+/// `scatter L_s` against the radiance the path finds by going on, `null L`, bounded away from
+/// 0 and 1 so neither event loses support.
 ///
 /// The mixture with standard tracking is one-sample over the whole flight, as in homogeneous
 /// media: the strategy is drawn once, and every event is weighted by the prefix's mixture
@@ -736,9 +748,65 @@ fn emissive_collision(
 /// `1 / (1 - alpha)`; over a long flight that compounds into rare, huge weights, enough for a
 /// cloud's render to miss its mean by many standard errors (see docs/experiments.md). This
 /// way no weight exceeds `1 / (1 - alpha)` times the standard tracker's.
+struct FieldSteer<'a, C> {
+    cache: &'a mut C,
+    ray: &'a Ray,
+    lookup_u: f32,
+    /// The phase function's mean cosine, for the cache's in-scattering estimate.
+    g: f32,
+    alpha: f32,
+    /// Whether this flight draws its events from the guided strategy.
+    guided: bool,
+    /// How far along the ray the cache's estimates stay in use.
+    refresh: f32,
+    /// The last estimates: where they were read, `L_s` and `L`.
+    cached: Option<(f32, f32, f32)>,
+    /// The prefix's guided probability over its standard one.
+    ratio: f32,
+}
+
+impl<C: RadianceCache> Steer for FieldSteer<'_, C> {
+    fn scatters(&mut self, at: Tentative, u: f32, standard: bool, counters: &mut Counters) -> bool {
+        counters.guided_density_lookups += 1;
+        let mut p_guided = at.p_std;
+        if at.scatter > 0.0 && at.null > 0.0 {
+            if self.cached.is_none_or(|(from, _, _)| at.t - from > self.refresh) {
+                counters.field_lookups += 1;
+                self.cached = self
+                    .cache
+                    .estimates(self.ray.at(at.t), self.lookup_u, self.ray.direction, self.g)
+                    .map(|e| (at.t, e.inscattered, e.incident));
+            }
+            if let Some((_, ls, li)) = self.cached {
+                let (a, b) = (at.scatter * ls, at.null * li);
+                if a + b > 0.0 && (a + b).is_finite() {
+                    p_guided = (a / (a + b)).clamp(0.02, 0.98);
+                }
+            }
+        }
+        let scatters = if self.guided { u < p_guided } else { standard };
+        if p_guided != at.p_std {
+            self.ratio *=
+                if scatters { p_guided / at.p_std } else { (1.0 - p_guided) / (1.0 - at.p_std) };
+        }
+        scatters
+    }
+
+    /// A ratio that overflowed means the standard tracker could (all but) never have made
+    /// this prefix: its weight is zero, never NaN.
+    fn gain(&self) -> f32 {
+        let g = 1.0 / (self.alpha * self.ratio + (1.0 - self.alpha));
+        if g.is_finite() { g } else { 0.0 }
+    }
+}
+
+/// A flight along `r`, the part of `ray` inside a heterogeneous medium, with the medium's
+/// `tracker`, steered towards the zero-variance collision density at distance `alpha` above 0
+/// (see [`FieldSteer`]).
 #[allow(clippy::too_many_arguments)]
-fn null_collision_flight(
+fn tracked_flight(
     medium: &Medium,
+    tracker: Tracker,
     r: &MediumRay<'_>,
     ray: &Ray,
     beta: Spectrum,
@@ -748,89 +816,31 @@ fn null_collision_flight(
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> GuidedFlight {
-    let emissive = medium.is_emissive();
-    let g = medium.phase.mean_cosine();
-    let guided = alpha > 0.0 && sampler.next_1d() < alpha;
-    let (t0, t1) = r.range();
-    let refresh = (t1 - t0) / REFRESHES as f32;
-    let mut cached: Option<(f32, f32, f32)> = None; // (t of lookup, L_s, L)
-    // The standard tracker's weight of the prefix, and its guided probability over its
-    // standard one: the prefix's weight is `standard / (alpha ratio + 1 - alpha)`.
-    let mut standard = Spectrum::ONE;
-    let mut ratio = 1.0f32;
-    // The prefix's weight over the standard tracker's. A ratio that overflowed means the
-    // standard tracker could (all but) never have made this prefix: its weight is zero,
-    // never NaN.
-    let gain = |ratio: f32| {
-        let g = 1.0 / (alpha * ratio + (1.0 - alpha));
-        if g.is_finite() { g } else { 0.0 }
+    let (f, gain) = if alpha > 0.0 {
+        let (t0, t1) = r.range();
+        let mut steer = FieldSteer {
+            cache,
+            ray,
+            lookup_u,
+            g: medium.phase.mean_cosine(),
+            alpha,
+            guided: sampler.next_1d() < alpha,
+            refresh: (t1 - t0) / REFRESHES as f32,
+            cached: None,
+            ratio: 1.0,
+        };
+        let tracker = tracker.steerable();
+        let f =
+            steered_flight_along(r, tracker, medium.emission, beta, sampler, counters, &mut steer);
+        (f, steer.gain())
+    } else {
+        (sample_flight_along(r, tracker, medium.emission, beta, sampler, counters), 1.0)
     };
-    let mixture = |standard: Spectrum, ratio: f32| standard * gain(ratio);
-    let mut emitted = Spectrum::ZERO;
-    // Tentative collisions at each coarse cell's own majorant (the bound grid the standard
-    // trackers use): any rate that bounds the extinction keeps the weights exact, and a tight
-    // one wastes fewer density lookups on null collisions than the medium's global majorant.
-    for span in r.segments() {
-        let majorant = span.majorant.max_element();
-        if !positive(majorant) {
-            continue; // an empty cell: nothing can collide in it
-        }
-        let mut t = span.t0;
-        loop {
-            t += crate::tracking::unit_exponential(sampler.next_1d()) / majorant;
-            if t >= span.t1 {
-                break;
-            }
-            let c = r.coefficients(t);
-            counters.density_lookups += 1;
-            counters.guided_density_lookups += 1;
-            let sigma_s = c.sigma_t * c.albedo;
-            let sigma_n = (Spectrum::splat(majorant) - c.sigma_t).max(Spectrum::ZERO);
-            let path = beta * standard;
-            if emissive {
-                let prefix = beta * mixture(standard, ratio);
-                emitted += prefix * (c.sigma_t - sigma_s) * medium.emission / majorant;
-            }
-            // Standard choice: history-aware spectral tracking (delta tracking when grey).
-            let (ps, pn) = (luminance(path * sigma_s), luminance(path * sigma_n));
-            if !positive(ps + pn) {
-                return GuidedFlight {
-                    emitted,
-                    ..GuidedFlight::new(GuidedEvent::Absorb, Spectrum::ZERO, 1.0)
-                };
-            }
-            let p_std = ps / (ps + pn);
-            let mut p_guided = p_std;
-            if alpha > 0.0 && ps > 0.0 && pn > 0.0 {
-                if cached.is_none_or(|(at, _, _)| t - at > refresh) {
-                    counters.field_lookups += 1;
-                    cached = cache
-                        .estimates(ray.at(t), lookup_u, ray.direction, g)
-                        .map(|e| (t, e.inscattered, e.incident));
-                }
-                if let Some((_, ls, li)) = cached {
-                    let (a, b) = (ps * ls, pn * li);
-                    if a + b > 0.0 && (a + b).is_finite() {
-                        // Bounded away from 0 and 1, so neither event loses support.
-                        p_guided = (a / (a + b)).clamp(0.02, 0.98);
-                    }
-                }
-            }
-            let p = if guided { p_guided } else { p_std };
-            if sampler.next_1d() < p {
-                standard *= sigma_s / (majorant * p_std);
-                ratio *= p_guided / p_std;
-                let weight = mixture(standard, ratio);
-                let gain = gain(ratio);
-                let event = GuidedEvent::Scatter { t };
-                return GuidedFlight { emitted, ..GuidedFlight::new(event, weight, gain) };
-            }
-            standard *= sigma_n / (majorant * (1.0 - p_std));
-            ratio *= (1.0 - p_guided) / (1.0 - p_std);
-        }
-    }
-    let weight = mixture(standard, ratio);
-    GuidedFlight { emitted, ..GuidedFlight::new(GuidedEvent::Pass, weight, gain(ratio)) }
+    let event = match f.event {
+        FlightEvent::Scatter { t } => GuidedEvent::Scatter { t },
+        FlightEvent::Escape => GuidedEvent::Pass,
+    };
+    GuidedFlight { emitted: f.emitted, ..GuidedFlight::new(event, f.weight * gain, gain) }
 }
 
 #[inline]

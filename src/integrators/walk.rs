@@ -360,6 +360,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
             let distance_alpha = settings.distance_alpha.min(MAX_ALPHA);
             let f = guided_flight(
                 medium,
+                scene.trackers[m as usize],
                 &s.ray,
                 t_max,
                 s.beta,

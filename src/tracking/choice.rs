@@ -100,13 +100,14 @@ impl Tracker {
             Tracker::AnalyticSpectral => {
                 "auto: homogeneous but chromatic, so closed forms per channel mixed by MIS"
             }
-            Tracker::Decomposition => {
-                "auto: heterogeneous and grey; the grid minorant is sampled without lookups \
-                 (relative cost 1 - mu_c / mu_bar of delta tracking)"
+            Tracker::Delta => {
+                "auto: heterogeneous and grey; delta tracking on the bound grid's cells (at \
+                 equal time it beat decomposition on every grid measured: the control's \
+                 exponential per cell costs more than the lookups it saves)"
             }
             _ => {
                 "auto: heterogeneous and chromatic, so spectral tracking (history-aware, \
-                 bounded weights) with the grid minorant as an analytic control"
+                 bounded weights); without decomposition, which did not pay on any grid measured"
             }
         }
     }

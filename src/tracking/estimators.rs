@@ -7,8 +7,9 @@
 //! it stands for divided by the rate or probability it was drawn with), so every tracker
 //! handles emission without a separate path.
 
+use super::steer::{Steer, Tentative};
 use super::{Flight, FlightEvent, TrackedRay};
-use crate::math::{Spectrum, channel_mean};
+use crate::math::{Spectrum, channel_mean, luminance};
 use crate::media::Coefficients;
 use crate::rng::Sampler;
 use crate::stats::Counters;
@@ -38,16 +39,15 @@ fn scatter(t: f32, weight: Spectrum, emitted: Spectrum) -> Flight {
 }
 
 /// Tentative collisions at `rate` over `(t0, t1)`, one density lookup each: `visit(t,
-/// coefficients, sampler)` decides at each, and its first `Some` ends the walk. The exponential
-/// restarts at every span boundary, which its memorylessness allows.
+/// coefficients, sampler, counters)` decides at each, and its first `Some` ends the walk. The
+/// exponential restarts at every span boundary, which its memorylessness allows.
 #[inline]
 fn tentative<R: TrackedRay, T>(
     r: &R,
     (t0, t1): (f32, f32),
     rate: f32,
-    s: &mut Sampler,
-    c: &mut Counters,
-    mut visit: impl FnMut(f32, Coefficients, &mut Sampler) -> Option<T>,
+    (s, c): (&mut Sampler, &mut Counters),
+    mut visit: impl FnMut(f32, Coefficients, &mut Sampler, &mut Counters) -> Option<T>,
 ) -> Option<T> {
     if rate <= 0.0 {
         return None;
@@ -60,7 +60,7 @@ fn tentative<R: TrackedRay, T>(
         }
         let co = r.coefficients(t);
         c.density_lookups += 1;
-        if let Some(v) = visit(t, co, s) {
+        if let Some(v) = visit(t, co, s, c) {
             return Some(v);
         }
     }
@@ -146,16 +146,25 @@ pub(super) fn delta<R: TrackedRay>(
     beta: Spectrum,
     s: &mut Sampler,
     c: &mut Counters,
+    steer: &mut impl Steer,
 ) -> Flight {
     let emissive = emission.max_element() > 0.0;
     let mut emitted = Spectrum::ZERO;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |t, co, s| {
+        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, (s, c), |t, co, s, c| {
+            let sigma_t = co.sigma_t.x;
             if emissive {
-                emitted += beta * absorbed(co.sigma_t, co.albedo, emission) / mu_bar;
+                emitted += beta * absorbed(co.sigma_t, co.albedo, emission) / mu_bar * steer.gain();
             }
-            (s.next_1d() * mu_bar < co.sigma_t.x).then(|| scatter(t, co.albedo, emitted))
+            let u = s.next_1d();
+            let at = Tentative {
+                t,
+                p_std: sigma_t / mu_bar,
+                scatter: luminance(beta * co.albedo) * sigma_t,
+                null: luminance(beta) * (mu_bar - sigma_t),
+            };
+            steer.scatters(at, u, u * mu_bar < sigma_t, c).then(|| scatter(t, co.albedo, emitted))
         });
         if let Some(flight) = hit {
             return flight;
@@ -173,20 +182,30 @@ pub(super) fn weighted_delta<R: TrackedRay>(
     beta: Spectrum,
     s: &mut Sampler,
     c: &mut Counters,
+    steer: &mut impl Steer,
 ) -> Flight {
     let emissive = emission.max_element() > 0.0;
     let mut emitted = Spectrum::ZERO;
     let mut w = 1.0f32;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |t, co, s| {
+        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, (s, c), |t, co, s, c| {
             let mu_t = co.sigma_t.x;
             let mu_n = mu_bar - mu_t;
             if emissive {
-                emitted += beta * w * absorbed(co.sigma_t, co.albedo, emission) / mu_bar;
+                emitted +=
+                    beta * w * absorbed(co.sigma_t, co.albedo, emission) / mu_bar * steer.gain();
             }
             let total = mu_t.abs() + mu_n.abs();
-            if s.next_1d() * total < mu_t.abs() {
+            let u = s.next_1d();
+            let path = luminance(beta).abs() * w.abs();
+            let at = Tentative {
+                t,
+                p_std: mu_t.abs() / total,
+                scatter: path * luminance(co.albedo) * mu_t.abs(),
+                null: path * mu_n.abs(),
+            };
+            if steer.scatters(at, u, u * total < mu_t.abs(), c) {
                 w *= mu_t.signum() * total / mu_bar;
                 return Some(scatter(t, co.albedo * w, emitted));
             }
@@ -209,6 +228,7 @@ pub(super) fn decomposition<R: TrackedRay>(
     beta: Spectrum,
     s: &mut Sampler,
     c: &mut Counters,
+    steer: &mut impl Steer,
 ) -> Flight {
     let emissive = emission.max_element() > 0.0;
     let mut emitted = Spectrum::ZERO;
@@ -217,20 +237,28 @@ pub(super) fn decomposition<R: TrackedRay>(
         let mu_r = (seg.majorant.max_element() - mu_c).max(0.0);
         let t_c = if mu_c > 0.0 { seg.t0 + exp_step(s.next_1d(), mu_c) } else { f32::INFINITY };
         let end = t_c.min(seg.t1);
-        let hit = tentative(r, (seg.t0, end), mu_r, s, c, |t, co, s| {
+        let hit = tentative(r, (seg.t0, end), mu_r, (s, c), |t, co, s, c| {
             let residual = co.sigma_t.x - mu_c;
             if emissive {
                 let sigma = co.sigma_t - Spectrum::splat(mu_c);
-                emitted += beta * absorbed(sigma, co.albedo, emission) / mu_r;
+                emitted += beta * absorbed(sigma, co.albedo, emission) / mu_r * steer.gain();
             }
-            (s.next_1d() * mu_r < residual).then(|| scatter(t, co.albedo, emitted))
+            let u = s.next_1d();
+            let at = Tentative {
+                t,
+                p_std: residual / mu_r,
+                scatter: luminance(beta * co.albedo) * residual,
+                null: luminance(beta) * (mu_r - residual),
+            };
+            steer.scatters(at, u, u * mu_r < residual, c).then(|| scatter(t, co.albedo, emitted))
         });
         if let Some(flight) = hit {
             return flight;
         }
         if t_c < seg.t1 {
             let a = r.albedo(t_c);
-            return scatter(t_c, a, emitted + beta * (Spectrum::ONE - a) * emission);
+            let own = beta * (Spectrum::ONE - a) * emission * steer.gain();
+            return scatter(t_c, a, emitted + own);
         }
     }
     escape(Spectrum::ONE, emitted)
@@ -254,6 +282,7 @@ pub(super) fn weighted_decomposition<R: TrackedRay>(
     beta: Spectrum,
     s: &mut Sampler,
     c: &mut Counters,
+    steer: &mut impl Steer,
 ) -> Flight {
     let emissive = emission.max_element() > 0.0;
     let mut emitted = Spectrum::ZERO;
@@ -275,7 +304,7 @@ pub(super) fn weighted_decomposition<R: TrackedRay>(
             if s.next_1d() < p_c {
                 // Control collision: weight mu_c / (rate p_c) = 1.
                 let a = r.albedo(t);
-                emitted += beta * w * (Spectrum::ONE - a) * emission;
+                emitted += beta * w * (Spectrum::ONE - a) * emission * steer.gain();
                 return scatter(t, a * w, emitted);
             }
             let co = r.coefficients(t);
@@ -284,10 +313,19 @@ pub(super) fn weighted_decomposition<R: TrackedRay>(
             let null = rate - co.sigma_t.x;
             if emissive {
                 let sigma = co.sigma_t - Spectrum::splat(mu_c);
-                emitted += beta * w * absorbed(sigma, co.albedo, emission) / (rate * q);
+                emitted +=
+                    beta * w * absorbed(sigma, co.albedo, emission) / (rate * q) * steer.gain();
             }
             let total = residual.abs() + null.abs();
-            if s.next_1d() * total < residual.abs() {
+            let u = s.next_1d();
+            let path = luminance(beta).abs() * w.abs();
+            let at = Tentative {
+                t,
+                p_std: residual.abs() / total,
+                scatter: path * luminance(co.albedo) * residual.abs(),
+                null: path * null.abs(),
+            };
+            if steer.scatters(at, u, u * total < residual.abs(), c) {
                 w *= residual.signum() * total / (rate * q);
                 return scatter(t, co.albedo * w, emitted);
             }
@@ -336,8 +374,8 @@ pub(super) fn spectral<R: TrackedRay>(
     probs: SpectralProbabilities,
     emission: Spectrum,
     beta: Spectrum,
-    s: &mut Sampler,
-    c: &mut Counters,
+    (s, c): (&mut Sampler, &mut Counters),
+    steer: &mut impl Steer,
     observe: &mut impl FnMut(SpectralEvent, Spectrum),
 ) -> Flight {
     let emissive = emission.max_element() > 0.0;
@@ -345,12 +383,12 @@ pub(super) fn spectral<R: TrackedRay>(
     let mut w = Spectrum::ONE;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |t, co, s| {
+        let hit = tentative(r, (seg.t0, seg.t1), mu_bar, (s, c), |t, co, s, c| {
             let sigma_s = co.sigma_t * co.albedo;
             let sigma_n = Spectrum::splat(mu_bar) - co.sigma_t;
             let path = beta * w;
             if emissive {
-                emitted += path * absorbed(co.sigma_t, co.albedo, emission) / mu_bar;
+                emitted += path * absorbed(co.sigma_t, co.albedo, emission) / mu_bar * steer.gain();
             }
             let p_s = probability(probs, path, sigma_s);
             let p_n = probability(probs, path, sigma_n);
@@ -358,7 +396,14 @@ pub(super) fn spectral<R: TrackedRay>(
             if total.is_nan() || total <= 0.0 {
                 return Some(escape(Spectrum::ZERO, emitted));
             }
-            if s.next_1d() * total < p_s {
+            let u = s.next_1d();
+            let at = Tentative {
+                t,
+                p_std: p_s / total,
+                scatter: luminance((path * sigma_s).abs()),
+                null: luminance((path * sigma_n).abs()),
+            };
+            if steer.scatters(at, u, u * total < p_s, c) {
                 w *= sigma_s * (total / (mu_bar * p_s));
                 observe(SpectralEvent::Scatter, beta * w);
                 return Some(scatter(t, w, emitted));
@@ -382,8 +427,8 @@ pub(super) fn spectral_decomposition<R: TrackedRay>(
     r: &R,
     emission: Spectrum,
     beta: Spectrum,
-    s: &mut Sampler,
-    c: &mut Counters,
+    (s, c): (&mut Sampler, &mut Counters),
+    steer: &mut impl Steer,
     observe: &mut impl FnMut(SpectralEvent, Spectrum),
 ) -> Flight {
     let emissive = emission.max_element() > 0.0;
@@ -411,7 +456,7 @@ pub(super) fn spectral_decomposition<R: TrackedRay>(
             if u < p_c {
                 let a = r.albedo(t);
                 let f = mu_c / (rate * p_c);
-                emitted += path * f * (Spectrum::ONE - a) * emission;
+                emitted += path * f * (Spectrum::ONE - a) * emission * steer.gain();
                 w *= f * a;
                 observe(SpectralEvent::Scatter, beta * w);
                 return scatter(t, w, emitted);
@@ -423,7 +468,8 @@ pub(super) fn spectral_decomposition<R: TrackedRay>(
             let residual_s = residual * co.albedo;
             let null = Spectrum::splat(rate) - co.sigma_t;
             if emissive {
-                emitted += path * absorbed(residual, co.albedo, emission) / (rate * q);
+                emitted +=
+                    path * absorbed(residual, co.albedo, emission) / (rate * q) * steer.gain();
             }
             let p_s = channel_mean((path * residual_s).abs());
             let p_n = channel_mean((path * null).abs());
@@ -431,7 +477,14 @@ pub(super) fn spectral_decomposition<R: TrackedRay>(
             if total.is_nan() || total <= 0.0 {
                 return escape(Spectrum::ZERO, emitted);
             }
-            if s.next_1d() * total < p_s {
+            let u = s.next_1d();
+            let at = Tentative {
+                t,
+                p_std: p_s / total,
+                scatter: luminance((path * residual_s).abs()),
+                null: luminance((path * null).abs()),
+            };
+            if steer.scatters(at, u, u * total < p_s, c) {
                 w *= residual_s * (total / (rate * q * p_s));
                 observe(SpectralEvent::Scatter, beta * w);
                 return scatter(t, w, emitted);
@@ -466,7 +519,7 @@ pub(super) fn ratio<R: TrackedRay>(r: &R, s: &mut Sampler, c: &mut Counters) -> 
     let mut tr = Spectrum::ONE;
     for seg in r.segments() {
         let mu_bar = seg.majorant.max_element();
-        let ended = tentative(r, (seg.t0, seg.t1), mu_bar, s, c, |_, co, s| {
+        let ended = tentative(r, (seg.t0, seg.t1), mu_bar, (s, c), |_, co, s, _| {
             tr *= Spectrum::ONE - co.sigma_t / mu_bar;
             (!roulette(&mut tr, s)).then_some(())
         });
@@ -487,7 +540,7 @@ pub(super) fn residual_ratio<R: TrackedRay>(r: &R, s: &mut Sampler, c: &mut Coun
         let len = seg.t1 - seg.t0;
         tr *= super::transmittance_homogeneous(mu_c, len);
         let mu_r = (seg.majorant - mu_c).abs().max_element();
-        let ended = tentative(r, (seg.t0, seg.t1), mu_r, s, c, |_, co, s| {
+        let ended = tentative(r, (seg.t0, seg.t1), mu_r, (s, c), |_, co, s, _| {
             tr *= Spectrum::ONE - (co.sigma_t - mu_c) / mu_r;
             (!roulette(&mut tr, s)).then_some(())
         });

@@ -14,16 +14,23 @@
 //! the minorant as its control. The estimators are generic over `TrackedRay`, which tests also
 //! implement for analytic extinction profiles.
 //!
-//! `TrackerChoice::Auto` picks per medium: closed form for homogeneous media, decomposition
-//! tracking for grids, spectral tracking (with decomposition) only for chromatic grids.
+//! Guided flights steer the same trackers (`Steer`, `steered_flight_along`): a steer may choose
+//! the event at each tentative collision that reads the density, and keeps the ratio by which
+//! the tracker's weight is corrected.
+//!
+//! `TrackerChoice::Auto` picks per medium: closed form for homogeneous media, delta tracking
+//! for grey grids, spectral tracking (history-aware) only for chromatic grids. Decomposition
+//! pays where density lookups are dear; on the bench's grids the control's exponential per
+//! cell costs more than the lookups it saves (see docs/experiments.md).
 
 mod choice;
 mod estimators;
+mod steer;
 
 pub(crate) use choice::explain;
 pub use choice::{TrackerChoice, TrackerError};
-pub(crate) use estimators::unit_exponential;
 pub use estimators::{SpectralEvent, SpectralProbabilities};
+pub use steer::{Steer, Tentative, Unsteered};
 
 use crate::math::{Ray, Spectrum};
 use crate::media::{Coefficients, Dda, Heterogeneous, Medium, MediumKind};
@@ -81,8 +88,8 @@ impl Tracker {
         match (&medium.kind, medium.is_chromatic()) {
             (MediumKind::Homogeneous { .. }, false) => Tracker::Analytic,
             (MediumKind::Homogeneous { .. }, true) => Tracker::AnalyticSpectral,
-            (MediumKind::Heterogeneous(_), false) => Tracker::Decomposition,
-            (MediumKind::Heterogeneous(_), true) => Tracker::SpectralDecomposition,
+            (MediumKind::Heterogeneous(_), false) => Tracker::Delta,
+            (MediumKind::Heterogeneous(_), true) => Tracker::Spectral,
         }
     }
 
@@ -101,6 +108,17 @@ impl Tracker {
             Tracker::SpectralMax => "spectral-max",
             Tracker::SpectralAverage => "spectral-average",
             Tracker::SpectralDecomposition => "spectral-decomposition",
+        }
+    }
+
+    /// The tracker a steered flight uses in its place ([`steered_flight_along`]): itself where
+    /// it draws tentative collisions; delta tracking for regular tracking, ray marching and
+    /// the grey closed form, which draw none; spectral tracking for the chromatic closed form.
+    pub fn steerable(self) -> Self {
+        match self {
+            Tracker::Analytic | Tracker::Regular | Tracker::RayMarching => Tracker::Delta,
+            Tracker::AnalyticSpectral => Tracker::Spectral,
+            other => other,
         }
     }
 
@@ -344,26 +362,46 @@ pub fn sample_flight_along<R: TrackedRay>(
     sampler: &mut Sampler,
     counters: &mut Counters,
 ) -> Flight {
+    steered_flight_along(r, tracker, emission, beta, sampler, counters, &mut Unsteered)
+}
+
+/// A free flight along a `TrackedRay` with `tracker`, `steer` choosing the event at each
+/// tentative collision that reads the density (see [`Steer`]). The weight returned is the
+/// tracker's standard one: the caller corrects it by the steer's [`gain`](Steer::gain), while
+/// the emission collected is already weighted by it. Regular tracking and ray marching draw no
+/// tentative collisions and ignore `steer`: [`Tracker::steerable`] names the tracker to
+/// steer in their place.
+pub fn steered_flight_along<R: TrackedRay>(
+    r: &R,
+    tracker: Tracker,
+    emission: Spectrum,
+    beta: Spectrum,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+    steer: &mut impl Steer,
+) -> Flight {
     use estimators as e;
     let (s, c) = (sampler, counters);
     let none = &mut |_: SpectralEvent, _: Spectrum| {};
     match tracker {
         Tracker::Analytic | Tracker::Regular => e::regular(r, emission, beta, s, c),
         Tracker::RayMarching => e::ray_marching(r, emission, beta, s, c),
-        Tracker::Delta => e::delta(r, emission, beta, s, c),
-        Tracker::WeightedDelta => e::weighted_delta(r, emission, beta, s, c),
-        Tracker::Decomposition => e::decomposition(r, emission, beta, s, c),
-        Tracker::WeightedDecomposition => e::weighted_decomposition(r, emission, beta, s, c),
+        Tracker::Delta => e::delta(r, emission, beta, s, c, steer),
+        Tracker::WeightedDelta => e::weighted_delta(r, emission, beta, s, c, steer),
+        Tracker::Decomposition => e::decomposition(r, emission, beta, s, c, steer),
+        Tracker::WeightedDecomposition => e::weighted_decomposition(r, emission, beta, s, c, steer),
         Tracker::Spectral | Tracker::AnalyticSpectral => {
-            e::spectral(r, SpectralProbabilities::History, emission, beta, s, c, none)
+            e::spectral(r, SpectralProbabilities::History, emission, beta, (s, c), steer, none)
         }
         Tracker::SpectralMax => {
-            e::spectral(r, SpectralProbabilities::Max, emission, beta, s, c, none)
+            e::spectral(r, SpectralProbabilities::Max, emission, beta, (s, c), steer, none)
         }
         Tracker::SpectralAverage => {
-            e::spectral(r, SpectralProbabilities::Average, emission, beta, s, c, none)
+            e::spectral(r, SpectralProbabilities::Average, emission, beta, (s, c), steer, none)
         }
-        Tracker::SpectralDecomposition => e::spectral_decomposition(r, emission, beta, s, c, none),
+        Tracker::SpectralDecomposition => {
+            e::spectral_decomposition(r, emission, beta, (s, c), steer, none)
+        }
     }
 }
 
@@ -383,12 +421,17 @@ pub fn spectral_flight_observed<R: TrackedRay>(
         Tracker::SpectralAverage => SpectralProbabilities::Average,
         Tracker::SpectralDecomposition => {
             return estimators::spectral_decomposition(
-                r, emission, beta, sampler, counters, observe,
+                r,
+                emission,
+                beta,
+                (sampler, counters),
+                &mut Unsteered,
+                observe,
             );
         }
         _ => SpectralProbabilities::History,
     };
-    estimators::spectral(r, probs, emission, beta, sampler, counters, observe)
+    estimators::spectral(r, probs, emission, beta, (sampler, counters), &mut Unsteered, observe)
 }
 
 /// An estimate of the transmittance along a `TrackedRay` with the shadow-ray estimator that

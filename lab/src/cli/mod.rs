@@ -200,8 +200,8 @@ struct SceneArgs {
     /// Override a value of the scene's [defaults] table (repeatable).
     #[arg(short = 'D', value_name = "KEY=VALUE")]
     define: Vec<String>,
-    /// Free-flight tracker: auto (per medium: closed form if homogeneous, decomposition for
-    /// grids, spectral only if chromatic) or one for every medium: analytic, analytic-spectral,
+    /// Free-flight tracker: auto (per medium: closed form if homogeneous, delta tracking for
+    /// grey grids, spectral tracking for chromatic ones) or one for every medium: analytic, analytic-spectral,
     /// regular, delta, weighted-delta, decomposition, weighted-decomposition, spectral,
     /// spectral-max, spectral-average, spectral-decomposition, ray-marching-biased (BIASED).
     #[arg(long, default_value = "auto", value_name = "TRACKER")]
