@@ -342,8 +342,8 @@ fn mitsuba_u_tent_filter() {
 }
 
 /// The Mitchell-Netravali filter at Mitsuba's defaults: negative lobes, signed sample weights.
-/// At 4096 spp: at 1024, dark pixels a few pixels from the light, which only its lobes' tips
-/// reach, saw no light at all (an estimate of 0 with no variance against Mitsuba's -2e-5).
+/// At 4096 spp: at 1024, dark pixels that only the lobes' tips reach from the light saw no
+/// light at all, an estimate with no variance (see docs/experiments.md).
 #[test]
 fn mitsuba_w_mitchell_filter() {
     validate("w-mitchell", 4096);
