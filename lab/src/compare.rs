@@ -230,6 +230,9 @@ pub struct Protocol {
     pub seeds: Vec<u64>,
     /// The fraction of worst pixels the trimmed relMSE leaves out.
     pub trim: f64,
+    /// Whether each method also renders 1/8, 1/4 and 1/2 of the budget with the first seed,
+    /// for the convergence curve.
+    pub curve: bool,
 }
 
 /// Runs every method with the protocol's budget and seeds on `scene` and measures it against
@@ -255,7 +258,7 @@ pub fn run(
     let Some(&first_seed) = protocol.seeds.first() else {
         return Err(CompareError::NoSeeds);
     };
-    let fractions = [0.125, 0.25, 0.5];
+    let fractions: &[f64] = if protocol.curve { &[0.125, 0.25, 0.5] } else { &[] };
     let steps = fractions.len() + protocol.seeds.len();
     let render_at = |scene: &mut Scene, m: &Method, fraction: f64, seed: u64| {
         scene.set_tracker(m.tracker).map_err(|e| CompareError::Tracker {
@@ -560,7 +563,8 @@ radiance = 1
         let base = RenderOptions::unguided(Budget::Samples(2), 1);
         let methods = ["a", "b"].map(|n| Method::parse(n, &base).expect("a bare name"));
         let reference = vec![[0.5f32; 3]; 12];
-        let protocol = Protocol { budget: Budget::Samples(2), seeds: vec![7, 8], trim: 0.0 };
+        let mut protocol =
+            Protocol { budget: Budget::Samples(2), seeds: vec![7, 8], trim: 0.0, curve: true };
         let order = std::cell::RefCell::new(Vec::new());
         let results = run(&mut scene, &reference, None, &methods, &protocol, &|m, step, _| {
             order.borrow_mut().push((m, step));
@@ -569,10 +573,21 @@ radiance = 1
         // Three convergence checkpoints per method, then seed 7 for a and b, then seed 8.
         let expected =
             [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (1, 2), (0, 3), (1, 3), (0, 4), (1, 4)];
-        assert_eq!(order.into_inner(), expected);
+        assert_eq!(order.replace(Vec::new()), expected);
         for r in &results {
             assert_eq!(r.runs.iter().map(|run| run.seed).collect::<Vec<_>>(), [7, 8]);
             assert_eq!(r.checkpoints.len(), 4);
+        }
+        // Without the curve, only the seeds' runs, the first of each the curve's one point.
+        protocol.curve = false;
+        let results = run(&mut scene, &reference, None, &methods, &protocol, &|m, step, _| {
+            order.borrow_mut().push((m, step));
+        })
+        .expect("the comparison runs");
+        assert_eq!(order.into_inner(), [(0, 0), (1, 0), (0, 1), (1, 1)]);
+        for r in &results {
+            assert_eq!(r.runs.len(), 2);
+            assert_eq!(r.checkpoints.iter().map(|c| c.fraction).collect::<Vec<_>>(), [1.0]);
         }
     }
 }

@@ -97,6 +97,11 @@ struct CompareArgs {
     /// Renders of each method, with seeds from --seed on; the tables give medians and ranges.
     #[arg(long, default_value_t = 3)]
     seeds: u32,
+    /// No convergence curve: each method renders only its seeds' runs, not also 1/8, 1/4 and
+    /// 1/2 of the budget (the comparison takes about half the time; the plot shows one point
+    /// per method).
+    #[arg(long)]
+    no_curve: bool,
     /// The window of `crops.png`, as X,Y,WIDTH,HEIGHT in pixels [default: a quarter of the
     /// image in each direction, where the first method's relative error is largest].
     #[arg(long, value_name = "X,Y,W,H")]
@@ -400,6 +405,7 @@ fn run_compare(a: CompareArgs) -> Result<()> {
         budget,
         seeds: (0..u64::from(a.seeds)).map(|k| base.seed.wrapping_add(k)).collect(),
         trim: a.trim,
+        curve: !a.no_curve,
     };
     let results = run(
         &mut scene,
