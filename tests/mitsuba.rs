@@ -361,3 +361,11 @@ fn mitsuba_x_lanczos_filter() {
 fn mitsuba_v_blended_phase_function() {
     validate("v-blendphase", 1024);
 }
+
+/// Mitsuba's `cylinder`: an open checkered tube turned off its axis (its texture coordinates,
+/// and its inside seen through the open end) and a thin glowing tube (area sampling of a
+/// cylinder light), in fog.
+#[test]
+fn mitsuba_y_cylinders() {
+    validate("y-cylinder", 16384);
+}

@@ -339,7 +339,24 @@ fn bad_input_names_the_place_and_the_fix() {
             "type=\"sphere\"",
             "type=\"teapot\"",
             "plugin.xml:5:5",
-            &["unknown shape `teapot`", "sphere, cube, rectangle, disk, obj, ply or serialized"],
+            &[
+                "unknown shape `teapot`",
+                "sphere, cube, rectangle, disk, cylinder, obj, ply or serialized",
+            ],
+        ),
+        (
+            "cylinder-axis",
+            "\"sphere\">\n        <float name=\"radius\" value=\"1\"/>",
+            "\"cylinder\">\n        <point name=\"p0\" value=\"0, 1, 0\"/><point name=\"p1\" value=\"0, 1, 0\"/>",
+            "cylinder-axis.xml:5",
+            &["(cylinder)", "must be apart: they give the tube's axis"],
+        ),
+        (
+            "cylinder-shear",
+            "\"sphere\">\n        <float name=\"radius\" value=\"1\"/>",
+            "\"cylinder\">\n        <transform name=\"to_world\"><scale x=\"2\"/></transform>",
+            "cylinder-shear.xml:5",
+            &["(cylinder)", "no shear, no mirroring: use an obj mesh"],
         ),
         (
             "type",

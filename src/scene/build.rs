@@ -16,7 +16,7 @@ use crate::media::{
     AlbedoField, DensityField, Grid, Heterogeneous, Medium, MediumKind, VdbGrid, VolGrid,
 };
 use crate::phase::{Lobe, PhaseFunction};
-use crate::shapes::{Cuboid, Disk, Geometry, Mesh, Parallelogram, Sphere};
+use crate::shapes::{Cuboid, Cylinder, Disk, Geometry, Mesh, Parallelogram, Sphere};
 use crate::tracking::Tracker;
 use crate::transform::Transform;
 use glam::{Vec2, Vec3, Vec3A};
@@ -335,6 +335,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
 fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
     let to_world = cx.transform(&d.transform)?;
     let not_sphere = [("center", d.center.is_some()), ("radius", d.radius.is_some())];
+    let not_cylinder = [("p0", d.p0.is_some()), ("p1", d.p1.is_some())];
     let not_obj = [
         ("filename", d.filename.is_some()),
         ("face_normals", d.face_normals.is_some()),
@@ -343,7 +344,7 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
     ];
     match d.kind.as_str() {
         "sphere" => {
-            cx.only("spheres", &not_obj)?;
+            cx.only("spheres", &[not_obj.as_slice(), &not_cylinder].concat())?;
             let center = d.center.unwrap_or(Vec3::ZERO);
             let radius = d.radius.unwrap_or(1.0);
             cx.finite("center", &center.to_array())?;
@@ -361,8 +362,13 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
                 ),
             }
         }
+        "cylinder" => {
+            cx.only("cylinders", &[&[not_sphere[0]], not_obj.as_slice()].concat())?;
+            cylinder(cx, d, to_world)
+        }
         "cube" | "rectangle" | "disk" => {
-            cx.only(&format!("{}s", d.kind), &[not_sphere.as_slice(), &not_obj].concat())?;
+            let not_these = [not_sphere.as_slice(), &not_cylinder, &not_obj].concat();
+            cx.only(&format!("{}s", d.kind), &not_these)?;
             Ok(match d.kind.as_str() {
                 "cube" => Geometry::Cuboid(Cuboid::new(to_world)),
                 "rectangle" => match Parallelogram::new(&to_world) {
@@ -377,7 +383,7 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
             let only_serialized = [("shape_index", d.kind != "serialized" && d.shape_index.is_some())];
             cx.only(
                 &format!("{} meshes", d.kind),
-                &[not_sphere.as_slice(), &only_obj, &only_serialized].concat(),
+                &[not_sphere.as_slice(), &not_cylinder, &only_obj, &only_serialized].concat(),
             )?;
             let file = cx.file(&cx.required("filename", &d.filename)?);
             if !file.is_file() {
@@ -398,8 +404,41 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
             mesh.map(Geometry::Mesh).or_else(|e| cx.err(format!("{}: {e}", file.display())))
         }
         other => cx.err(format!(
-            "unknown shape type `{other}`; use sphere, cube, rectangle, disk, obj, ply or serialized"
+            "unknown shape type `{other}`; use sphere, cube, rectangle, disk, cylinder, obj, ply or \
+             serialized"
         )),
+    }
+}
+
+/// Mitsuba's cylinder: the unit tube scaled to `radius` across and to the length from `p0` to
+/// `p1` along, turned onto that axis (by the frame Mitsuba builds around it, which places u's
+/// seam) and moved to `p0`, then `to_world`.
+fn cylinder(cx: &Ctx<'_>, d: &ShapeDesc, to_world: Transform) -> Result<Geometry> {
+    let (p0, p1) = (d.p0.unwrap_or(Vec3::ZERO), d.p1.unwrap_or(Vec3::Z));
+    let radius = d.radius.unwrap_or(1.0);
+    cx.finite("p0", &p0.to_array())?;
+    cx.finite("p1", &p1.to_array())?;
+    if !(radius > 0.0 && radius.is_finite()) {
+        return cx.err(format!("radius {radius} must be positive"));
+    }
+    let axis = p1 - p0;
+    let length = axis.length();
+    if !(length > 0.0 && length.is_finite()) {
+        return cx.err(format!("p0 {p0} and p1 {p1} must be apart: they give the tube's axis"));
+    }
+    let f = crate::math::Frame::from_z((axis / length).into());
+    let cols = [f.x * radius, f.y * radius, f.z * length].map(Vec3::from);
+    let local = Transform::new(glam::Affine3A::from_mat3_translation(
+        glam::Mat3::from_cols(cols[0], cols[1], cols[2]),
+        p0,
+    ));
+    match local.map(|t| t.then(&to_world)).as_ref().and_then(Cylinder::new) {
+        Some(c) => Ok(Geometry::Cylinder(c)),
+        None => cx.err(
+            "a cylinder's transform may rotate, translate, scale uniformly across the axis and \
+             stretch along it, nothing else (no shear, no mirroring: use an obj mesh for other \
+             tubes)",
+        ),
     }
 }
 

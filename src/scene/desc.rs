@@ -300,13 +300,17 @@ pub struct EmitterDesc {
 #[derive(Clone, Debug, Default, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ShapeDesc {
-    /// "sphere", "cube", "rectangle", "disk", "obj", "ply" or "serialized".
+    /// "sphere", "cube", "rectangle", "disk", "cylinder", "obj", "ply" or "serialized".
     #[serde(rename = "type")]
     pub kind: String,
     /// Sphere: centre (default origin).
     pub center: Option<Vec3>,
-    /// Sphere: radius (default 1).
+    /// Sphere, cylinder: radius (default 1).
     pub radius: Option<f32>,
+    /// Cylinder: where its centre line starts (default origin).
+    pub p0: Option<Vec3>,
+    /// Cylinder: where its centre line ends (default (0, 0, 1)).
+    pub p1: Option<Vec3>,
     /// Obj, ply, serialized: the file, relative to the scene file.
     pub filename: Option<String>,
     /// Obj, ply, serialized: ignore the file's vertex normals.

@@ -1,5 +1,5 @@
-//! Geometry: analytic spheres, disks, rectangles and boxes (squares and cubes under an affine
-//! map) and triangle meshes, their ray intersection, surface parameterisation and area
+//! Geometry: analytic spheres, disks, cylinders, rectangles and boxes (squares and cubes under
+//! an affine map) and triangle meshes, their ray intersection, surface parameterisation and area
 //! sampling for emitters.
 //!
 //! Everything is stored in world space once the scene is built, so a ray never needs to be
@@ -7,6 +7,7 @@
 //! (shape, index) and asks this module to intersect them.
 
 mod cuboid;
+mod cylinder;
 mod disk;
 mod mesh;
 mod parallelogram;
@@ -15,6 +16,7 @@ mod serialized;
 mod sphere;
 
 pub use cuboid::Cuboid;
+pub use cylinder::Cylinder;
 pub use disk::Disk;
 pub use mesh::{Mesh, MeshError};
 pub use parallelogram::Parallelogram;
@@ -68,6 +70,8 @@ pub enum Geometry {
     Sphere(Sphere),
     /// An analytic disk (an ellipse under non-uniform scaling).
     Disk(Disk),
+    /// An analytic open tube (Mitsuba's cylinder).
+    Cylinder(Cylinder),
     /// An analytic box (a cube under an affine map).
     Cuboid(Cuboid),
     /// An analytic rectangle (a square under an affine map).
@@ -90,6 +94,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.bounds(),
             Geometry::Disk(d) => d.bounds(),
+            Geometry::Cylinder(c) => c.bounds(),
             Geometry::Cuboid(c) => c.bounds(),
             Geometry::Parallelogram(r) => r.bounds(),
             Geometry::Mesh(m) => m.triangle_bounds(i),
@@ -102,6 +107,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.intersect(ray, t_max),
             Geometry::Disk(d) => d.intersect(ray, t_max),
+            Geometry::Cylinder(c) => c.intersect(ray, t_max),
             Geometry::Cuboid(c) => c.intersect(ray, t_max),
             Geometry::Parallelogram(r) => r.intersect(ray, t_max),
             Geometry::Mesh(m) => m.intersect_triangle(i, ray, t_max),
@@ -109,12 +115,13 @@ impl Geometry {
     }
 
     /// Where a ray that met primitive `i` at `t` meets it next, within `t_max`: closed shapes
-    /// (spheres, boxes) are crossed twice, flat primitives only once.
+    /// (spheres, boxes) and tubes are crossed twice, flat primitives only once.
     #[inline]
     pub fn next_crossing(&self, _i: u32, ray: &Ray, t: f32, t_max: f32) -> Option<PrimHit> {
         match self {
             Geometry::Sphere(s) => s.crossing(ray, t, t_max),
             Geometry::Cuboid(c) => c.crossing(ray, t, t_max),
+            Geometry::Cylinder(c) => c.crossing(ray, t, t_max),
             Geometry::Disk(_) | Geometry::Parallelogram(_) | Geometry::Mesh(_) => None,
         }
     }
@@ -124,6 +131,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.surface(ray, hit),
             Geometry::Disk(d) => d.surface(ray, hit),
+            Geometry::Cylinder(c) => c.surface(ray, hit),
             Geometry::Cuboid(c) => c.surface(ray, hit),
             Geometry::Parallelogram(r) => r.surface(ray, hit),
             Geometry::Mesh(m) => m.surface(i, ray, hit),
@@ -146,6 +154,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.area(),
             Geometry::Disk(d) => d.area(),
+            Geometry::Cylinder(c) => c.area(),
             Geometry::Cuboid(c) => c.area(),
             Geometry::Parallelogram(r) => r.area(),
             Geometry::Mesh(m) => m.area(),
@@ -158,6 +167,7 @@ impl Geometry {
         match self {
             Geometry::Sphere(s) => s.sample(reference, u),
             Geometry::Disk(d) => area_to_solid_angle(reference, d.sample_area(u), d.area()),
+            Geometry::Cylinder(c) => area_to_solid_angle(reference, c.sample_area(u), c.area()),
             Geometry::Cuboid(c) => area_to_solid_angle(reference, c.sample_area(u), c.area()),
             Geometry::Parallelogram(r) => {
                 area_to_solid_angle(reference, r.sample_area(u), r.area())

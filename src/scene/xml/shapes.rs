@@ -13,7 +13,7 @@ use glam::{Vec3, Vec3A};
 use std::rc::Rc;
 use toml::Spanned;
 
-const SHAPES: &str = "sphere, cube, rectangle, disk, obj, ply or serialized";
+const SHAPES: &str = "sphere, cube, rectangle, disk, cylinder, obj, ply or serialized";
 const BSDFS: &str = "null, diffuse, dielectric, thindielectric, plastic, conductor, \
                      roughdielectric, roughplastic, roughconductor, mask, or twosided around \
                      diffuse, plastic, conductor or their rough kinds";
@@ -22,11 +22,16 @@ const EMITTERS: &str = "point, spot, directional, constant, envmap, and area ins
 pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc>> {
     let p = Props::new(o);
     match o.kind.as_str() {
-        "sphere" | "cube" | "rectangle" | "disk" | "obj" | "ply" | "serialized" => {}
+        "sphere" | "cube" | "rectangle" | "disk" | "cylinder" | "obj" | "ply" | "serialized" => {}
         other => return Err(p.err(format!("unknown shape `{other}`; use {SHAPES}"))),
     }
-    let (center, radius) =
-        if o.kind == "sphere" { (p.vector("center")?, p.float("radius")?) } else { (None, None) };
+    let (center, radius) = match o.kind.as_str() {
+        "sphere" => (p.vector("center")?, p.float("radius")?),
+        "cylinder" => (None, p.float("radius")?),
+        _ => (None, None),
+    };
+    let (p0, p1) =
+        if o.kind == "cylinder" { (p.vector("p0")?, p.vector("p1")?) } else { (None, None) };
     let (mut filename, mut face_normals, mut flip_uv, mut shape_index) = (None, None, true, None);
     if ["obj", "ply", "serialized"].contains(&o.kind.as_str()) {
         let Some((name, prop)) = p.string("filename")? else {
@@ -106,6 +111,8 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         kind: o.kind.clone(),
         center,
         radius,
+        p0,
+        p1,
         filename,
         face_normals,
         flip_tex_coords: (o.kind == "obj").then_some(flip_uv),
