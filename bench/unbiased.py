@@ -9,11 +9,15 @@ Usage: python3 bench/unbiased.py ZEROVAR [--target 0.002] [--run-seconds 0.5]
 
 Per scene, one unguided render of 4 spp times the work; each run then renders SPP samples per
 pixel (a power of two, 32 to 4096, chosen so that an unguided run takes about --run-seconds),
-and rounds of runs follow, one per mode and seed with seeds 1, 2, ..., until every mode's
-relative standard error (of its mean minus unguided's, over unguided's) is at most --target or
-the scene has taken --scene-seconds. Every run is an independent unbiased estimate, so the
-difference of the means over runs has mean zero and a standard error taken from the spread of
-the runs; z is the difference over it. Per channel, the reported z is the channel furthest
+and MIN_ROUNDS rounds of runs follow, one per method (unguided and each mode) with seeds 1, 2,
+.... Then, until every mode's relative standard error (of its mean minus unguided's, over
+unguided's) is at most --target or the scene has taken --scene-seconds, the next run goes to
+the method whose run lowers the unfinished modes' squared standard errors most per second (the
+unguided runs serve every mode, so where unguided sampling is the noisy one it gets most runs).
+Every run is an independent unbiased estimate, so the difference of the means over runs has
+mean zero and a standard error taken from the spread of the runs; z is the difference over it,
+under Student's t with the fewer of the two methods' runs less one degrees of freedom (no more
+than Welch's, so never a z too large). Per channel, the reported z is the channel furthest
 from zero. Blocks: per 8x8-pixel block and channel the same z; the table gives the largest
 |z| over blocks and how many exceed 4 (with N blocks x 3 channels, a normal z exceeds 4 about
 6e-5 N times), and the z of the whole image is what decides: a |z| beyond 4 is a bug to find.
@@ -138,8 +142,34 @@ def compare(guided, unguided):
     bse = np.sqrt(bv + ubv + (ROUNDING * ubm) ** 2)
     with np.errstate(divide="ignore", invalid="ignore"):
         bz = np.where(bse > 0, (bm - ubm) / bse, 0.0)
-    dof = len(guided.means) - 1
+    dof = min(len(guided.means), len(unguided.means)) - 1
     return rel, rel_se, normal_equivalent(z, dof), normal_equivalent(bz, dof)
+
+
+def next_method(runs, modes, target):
+    """The method whose next run lowers the squared relative standard errors of the modes not
+    yet at `target` most per second of its runs, or None when every mode is there."""
+    off = runs["off"]
+    um = np.abs(np.array(off.means).mean(0))
+    um = np.where(um > 0, um, np.inf)
+    def shares(r):
+        # A run's variance over the mean squared, per channel, and what one more run removes.
+        v = np.array(r.means).var(0, ddof=1) / um ** 2
+        n = len(r.means)
+        return v / n, v / n - v / (n + 1)
+    off_se2, off_gain = shares(off)
+    gains = {m: 0.0 for m in runs}
+    for m in modes:
+        se2, gain = shares(runs[m])
+        total = se2 + off_se2
+        c = int(np.argmax(total))
+        if total[c] <= target ** 2:
+            continue
+        gains[m] += gain[c]
+        gains["off"] += off_gain[c]
+    if all(g == 0.0 for g in gains.values()):
+        return None
+    return max(gains, key=lambda m: gains[m] / (runs[m].seconds / len(runs[m].means)))
 
 
 def worst(values, z):
@@ -180,30 +210,29 @@ def main():
         _, t4 = render(a.zerovar, scene, "off", 4, 0, out)
         spp = int(min(4096, max(32, 2 ** round(np.log2(max(4 * a.run_seconds / max(t4, 1e-3), 1))))))
         runs = {m: Runs() for m in ["off"] + modes}
-        seed = 0
-        while True:
-            seed += 1
+        for seed in range(1, MIN_ROUNDS + 1):
             for m in runs:
-                img, s = render(a.zerovar, scene, m, spp, seed, out)
-                runs[m].add(img, s)
-            if seed < MIN_ROUNDS:
-                continue
-            done = all(np.max(compare(runs[m], runs["off"])[1]) <= a.target for m in modes)
-            if done or time.time() - start > a.scene_seconds:
+                runs[m].add(*render(a.zerovar, scene, m, spp, seed, out))
+        while time.time() - start <= a.scene_seconds:
+            m = next_method(runs, modes, a.target)
+            if m is None:
                 break
+            runs[m].add(*render(a.zerovar, scene, m, spp, len(runs[m].means) + 1, out))
+        seed = len(runs["off"].means)
         for m in modes:
             rel, rel_se, z, bz = compare(runs[m], runs["off"])
             zc, c = worst(z, z)
             nb = bz.size
             rows.append({
-                "scene": name, "mode": m, "spp": spp, "seeds": seed, "channel": "RGB"[c],
+                "scene": name, "mode": m, "spp": spp, "seeds": len(runs[m].means),
+                "unguided": seed, "channel": "RGB"[c],
                 "rel": rel[c], "rel_se": rel_se[c], "z": zc,
                 "blocks": nb, "block_max": float(np.max(np.abs(bz))) if nb else 0.0,
                 "block_over4": int(np.sum(np.abs(bz) > 4)),
                 "reached": bool(np.max(rel_se) <= a.target),
             })
             r = rows[-1]
-            print(f"{name:16s} {m:10s} {spp:5d} spp x {seed:3d}: diff {100 * r['rel']:+.3f}% "
+            print(f"{name:16s} {m:10s} {spp:5d} spp x {r['seeds']:3d} (unguided {seed}): diff {100 * r['rel']:+.3f}% "
                   f"+- {100 * r['rel_se']:.3f}% z {r['z']:+.2f}  blocks max |z| {r['block_max']:.1f}, "
                   f"{r['block_over4']} of {nb} over 4", file=sys.stderr)
     section = table(rows, a)
@@ -222,17 +251,18 @@ def table(rows, a):
         "guided renders against unguided ones, each run an independent render of the same spp "
         f"(seeds 1, 2, ...), until the relative standard error of the difference is at most "
         f"{100 * a.target:.1f}% (or the scene's {a.scene_seconds:.0f} s are spent: `reached` says "
-        "which). z is the normal deviate with the two-sided probability of the difference over "
-        "its standard error under Student's t with runs - 1 degrees of freedom. The channel shown "
+        "which); after 8 runs of each, a run goes where it lowers the standard errors most per "
+        "second. z is the normal deviate with the two-sided probability of the difference over "
+        "its standard error under Student's t with the fewer runs less one degrees of freedom. The channel shown "
         "is the one whose z is furthest from 0; blocks are 8x8 pixels, per channel (a normal z "
         "exceeds 4 in about 6e-5 of them).",
         "",
-        "| scene | mode | spp x runs | guided - unguided | its standard error | z | reached | blocks: max abs z | blocks over 4 |",
+        "| scene | mode | spp x runs (unguided's) | guided - unguided | its standard error | z | reached | blocks: max abs z | blocks over 4 |",
         "|---|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
         lines.append(
-            f"| {r['scene']} | {r['mode']} | {r['spp']} x {r['seeds']} | {100 * r['rel']:+.3f}% ({r['channel']}) "
+            f"| {r['scene']} | {r['mode']} | {r['spp']} x {r['seeds']} ({r['unguided']}) | {100 * r['rel']:+.3f}% ({r['channel']}) "
             f"| {100 * r['rel_se']:.3f}% | {r['z']:+.2f} | {'yes' if r['reached'] else 'no'} "
             f"| {r['block_max']:.1f} | {r['block_over4']} of {r['blocks']} |")
     bad = [r for r in rows if abs(r["z"]) > 4]
