@@ -38,7 +38,8 @@ fn camera_sample<C: RadianceCache>(
 }
 
 /// A cache with fixed estimates: `incident` and `inscattered` times a bright blob around
-/// `centre` (so guided probabilities vary along a ray), all scaled by `scale`.
+/// `centre` (so guided probabilities vary along a ray), all scaled by `scale`; its regions
+/// are slabs between the planes x = `cuts[i]`.
 #[derive(Clone)]
 struct Analytic {
     incident: f32,
@@ -46,11 +47,19 @@ struct Analytic {
     blob: Option<Vec3A>,
     scale: f32,
     at: Vec3A,
+    cuts: &'static [f32],
 }
 
 impl Analytic {
     fn constant(value: f32) -> Self {
-        Self { incident: value, inscattered: value, blob: None, scale: 1.0, at: Vec3A::ZERO }
+        Self {
+            incident: value,
+            inscattered: value,
+            blob: None,
+            scale: 1.0,
+            at: Vec3A::ZERO,
+            cuts: &[],
+        }
     }
     fn factor(&self) -> f32 {
         let blob = self.blob.map_or(0.0, |c| 40.0 * (-(self.at - c).length_squared()).exp());
@@ -83,6 +92,10 @@ impl RadianceCache for Analytic {
     }
     fn pdf(&self, _: Vec3A) -> f32 {
         0.0
+    }
+    fn region_exit(&self, x: Vec3A, w: Vec3A) -> f32 {
+        let ahead = |c: f32| if w.x != 0.0 { (c - x.x) / w.x } else { f32::INFINITY };
+        self.cuts.iter().map(|&c| ahead(c)).filter(|&t| t > 0.0).fold(f32::INFINITY, f32::min)
     }
 }
 
@@ -166,6 +179,61 @@ fn guided_distances_follow_their_density_which_integrates_to_one() {
             }
         }
     }
+}
+
+/// Guided distances follow the cache's regions along the ray: one segment, and one lookup,
+/// per region the walk reaches, with a density that still integrates to one and that the
+/// samples follow.
+#[test]
+fn guided_distances_cut_at_region_boundaries_follow_their_density() {
+    let text = "type = \"homogeneous\"\nsigma_t = [0.3, 0.8, 2.0]\nalbedo = 0.9";
+    let medium = medium_of(text);
+    let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
+    let t_max = 6.0f32;
+    let cuts: &[f32] = &[1.3, 2.4, 4.7];
+    let cache = Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), cuts, ..Analytic::constant(1.0) };
+    let pick = Vec3A::new(0.2, 0.5, 0.3);
+    let state = RefCell::new((
+        GuidedDistance::new(&medium, &ray, t_max, pick, 0.6, 0.5, 1).unwrap(),
+        cache,
+        Counters::default(),
+    ));
+    let pdf = |t: f64| {
+        let (d, c, n) = &mut *state.borrow_mut();
+        d.pdf(t as f32, &medium, c, n) as f64
+    };
+    let pass = {
+        let (d, c, n) = &mut *state.borrow_mut();
+        d.pass_probability(&medium, c, n) as f64
+    };
+    // Every region of the stretch got its lookup, and the segments' probabilities differ.
+    assert_eq!(state.borrow().2.field_lookups, 4);
+    let edges: Vec<f64> = [0.0f64, 1.3, 2.4, 4.7, 6.0].to_vec();
+    let total: f64 =
+        edges.windows(2).map(|w| integrate_1d(&pdf, w[0], w[1], 64)).sum::<f64>() + pass;
+    assert!((total - 1.0).abs() < 1e-4, "density integrates to {total}");
+    let jumps = [1.3f64, 2.4, 4.7].map(|c| pdf(c - 1e-4) / pdf(c + 1e-4));
+    assert!(jumps.iter().all(|j| (j - 1.0).abs() > 0.01), "no steps at the cuts: {jumps:?}");
+    let mut sampler = Sampler::new(6, 0, 0);
+    let samples: Vec<f64> = (0..100_000)
+        .map(|_| {
+            let (d, c, n) = &mut *state.borrow_mut();
+            match d.sample(&medium, c, &mut sampler, n) {
+                (Some(t), ..) => t as f64,
+                (None, ..) => -1.0,
+            }
+        })
+        .collect();
+    let mut bins: Vec<f64> = (0..=32).map(|i| f64::from(t_max) * f64::from(i) / 32.0).collect();
+    bins.extend([1.3, 2.4, 4.7]);
+    bins.sort_by(f64::total_cmp);
+    chi2_1d(&samples, &pdf, &bins, &[(-1.0, pass)]).assert_pass(1e-3, "cut at regions");
+    // At alpha 0 nothing is looked up and no region cuts the stretch.
+    let mut standard = GuidedDistance::new(&medium, &ray, t_max, pick, 0.0, 0.5, 1).unwrap();
+    let (_, c, _) = &mut *state.borrow_mut();
+    let mut counters = Counters::default();
+    standard.pass_probability(&medium, c, &mut counters);
+    assert_eq!(counters.field_lookups, 0);
 }
 
 /// A point light for equiangular extra collisions.

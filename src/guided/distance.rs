@@ -7,15 +7,17 @@
 //! its tentative collisions as always, and at each one that reads the density a steer
 //! (`tracking::Steer`) may scatter with a probability of its choice, the weight corrected by
 //! its ratio to the tracker's. The zero-variance choice weighs in-scattered radiance
-//! `sigma_s L_s` against the radiance the path finds by going on, `sigma_n L(x, w)`; mixing it
-//! with the tracker's own choice keeps it robust.
+//! `sigma_s L_s` against the radiance the path finds by going on, `sigma_n L(x, w)`, with the
+//! cache read again where the ray leaves its region; mixing it with the tracker's own choice
+//! keeps it robust.
 //!
-//! In homogeneous media the ray's stretch inside the medium is cut into segments. For each
-//! segment the cache gives the conditional probability of colliding in it once the walk has
-//! reached it (the estimated radiance the segment sends back over the radiance entering it),
-//! and inside a segment the offset follows a truncated exponential of a proxy coefficient.
-//! Segments are evaluated lazily, only as far as the walk goes (the incremental CDF: no
-//! normalisation pass over the whole ray); guided flights use one ([`SEGMENTS`]). The
+//! In homogeneous media the ray's stretch inside the medium is cut into segments where it
+//! leaves each of the cache's regions. For each segment the cache gives the conditional
+//! probability of colliding in it once the walk has reached it (the estimated radiance the
+//! segment sends back over the radiance entering it), and inside a segment the offset follows
+//! a truncated exponential of a proxy coefficient. Segments are built lazily, only as far as
+//! the walk goes (the incremental CDF: no normalisation pass over the whole ray), so a flight
+//! pays one lookup per region it reaches. The
 //! standard strategy uses the same segments with the exponential's own probabilities, so the
 //! one-sample mixture `alpha p_guided + (1 - alpha) p_standard` has an exact density. The
 //! weights use the exact transmittance, so every channel stays unbiased. There, too, a flight
@@ -39,18 +41,21 @@ use crate::tracking::{
     sample_flight_along, steered_flight_along, transmittance_homogeneous,
 };
 
-/// Equal segments of the guided stretch in guided flights: one, so a flight costs one cache
-/// lookup. Finer segments follow the in-scattered light along the ray more closely, but the
-/// regions are coarser than the segments and extra collisions already follow delta lights
-/// in 16 parts: one segment gave the same error per sample in less time (see
-/// docs/experiments.md).
+/// Equal parts a guided flight cuts its guided stretch into, besides the cache's region
+/// boundaries: one, so a flight looks the cache up once per region it reaches. Equal parts
+/// finer than the regions cost more lookups than they save, and extra collisions already
+/// follow delta lights in 16 parts (see docs/experiments.md).
 pub const SEGMENTS: usize = 1;
-/// Most segments a distribution may have.
-pub const MAX_SEGMENTS: usize = 4;
+/// Most segments of the guided stretch (equal parts and region crossings together); the last
+/// runs to the stretch's end, so a ray through many small regions costs at most this many
+/// lookups.
+pub const MAX_SEGMENTS: usize = 8;
+/// The shortest segment a region boundary may cut, as a share of the guided stretch: a ray
+/// grazing a region's corner is not worth a lookup.
+const MIN_SEGMENT: f32 = 1.0 / 32.0;
 /// How many times a heterogeneous flight refreshes its cache estimates along the medium's
-/// stretch: regions are coarser than the spacing of tentative collisions, and a lookup costs
-/// far more than a density lookup.
-const REFRESHES: usize = 4;
+/// stretch at most: once per region its tentative collisions reach, up to this.
+const REFRESHES: usize = MAX_SEGMENTS;
 /// Bounds of the guided per-segment probability relative to the standard one, so a cache
 /// that is wrong (zero, or off by orders of magnitude) can neither remove support nor force
 /// every path into one segment.
@@ -79,11 +84,17 @@ pub struct GuidedDistance {
     sigma: Spectrum,
     alpha: f32,
     guided_end: f32,
+    t_max: f32,
     lookup_u: f32,
     emission: f32,
+    /// Equal parts of the guided stretch, and the one the next segment starts in.
+    parts: usize,
+    part: usize,
+    /// Segments built so far: lazily, only as far as the walk goes (the incremental CDF).
     segments: [Segment; MAX_SEGMENTS + 1],
-    count: usize,
-    computed: usize,
+    built: usize,
+    /// Whether the last segment is built.
+    complete: bool,
     /// Whether the guided stretch reached the end of the ray (no tail segment).
     ends_at_t_max: bool,
     /// The standard strategy's weight of each channel (summing to 1).
@@ -101,7 +112,8 @@ impl GuidedDistance {
     /// the ray cannot collide (empty medium) or the medium is heterogeneous.
     /// `alpha` is the probability of the guided strategy; `lookup_u` drives the cache's
     /// spatial filter for every lookup of this ray; the guided stretch is cut into `parts`
-    /// equal segments ([`SEGMENTS`] in guided flights).
+    /// equal parts ([`SEGMENTS`] in guided flights), and where `alpha` is above 0 also where
+    /// the ray leaves each of the cache's regions, up to [`MAX_SEGMENTS`] segments.
     ///
     /// # Panics
     /// If `parts` is not within 1 to [`MAX_SEGMENTS`].
@@ -126,70 +138,24 @@ impl GuidedDistance {
         let total = pick.element_sum();
         let pick = if total > 0.0 { pick / total } else { Spectrum::splat(1.0 / 3.0) };
         let mean = pick.dot(sigma);
-        let (a, b) = (0.0, t_max);
-        if !positive(mean) || b <= a || b.is_nan() {
+        if !positive(mean) || t_max <= 0.0 || t_max.is_nan() {
             return None;
         }
-        let guided_end = b.min(a + CUT / mean);
-        let ends_at_t_max = guided_end >= b;
-        let step = (guided_end - a) / parts as f32;
-        let mut segments = [Segment::default(); MAX_SEGMENTS + 1];
-        for (k, s) in segments.iter_mut().enumerate().take(parts) {
-            s.start = a + step * k as f32;
-            s.length = step;
-        }
-        let mut count = parts;
-        if !ends_at_t_max {
-            segments[parts] =
-                Segment { start: guided_end, length: b - guided_end, ..Default::default() };
-            count += 1;
-        }
-        // Per channel, the mixture's mass at each segment's start, renormalised to a largest
-        // entry of 1 as it goes (so deep segments do not underflow), and the probability of
-        // colliding within a segment: the same for all equal segments, so one exponential per
-        // channel covers them.
-        let positive_sigma = sigma.cmpgt(Spectrum::ZERO);
-        let step_decay = exp(-sigma * step);
-        let step_collide = Spectrum::select(positive_sigma, -exp_m1(-sigma * step), Spectrum::ZERO);
-        let mut mass = Spectrum::select(pick.cmpgt(Spectrum::ZERO), pick, Spectrum::ZERO);
-        mass /= mass.max_element();
-        for (k, s) in segments[..count].iter_mut().enumerate() {
-            if k == parts {
-                // The tail, from the cut on.
-                let log = Spectrum::select(
-                    pick.cmpgt(Spectrum::ZERO),
-                    ln(pick) - sigma * s.start,
-                    Spectrum::splat(f32::NEG_INFINITY),
-                );
-                mass = exp(log - Spectrum::splat(log.max_element()));
-            }
-            s.mass = mass;
-            s.collide = if k < parts {
-                step_collide
-            } else if s.length.is_finite() {
-                Spectrum::select(positive_sigma, -exp_m1(-sigma * s.length), Spectrum::ZERO)
-            } else {
-                Spectrum::select(positive_sigma, Spectrum::ONE, Spectrum::ZERO)
-            };
-            s.p_std = s.mass.dot(s.collide) / s.mass.element_sum();
-            s.p_guided = s.p_std;
-            mass *= step_decay;
-            let top = mass.max_element();
-            if top > 0.0 {
-                mass /= top;
-            }
-        }
+        let guided_end = t_max.min(CUT / mean);
         Some(Self {
             ray: *ray,
             sigma,
             alpha,
             guided_end,
+            t_max,
             lookup_u,
             emission: luminance(medium.emission),
-            segments,
-            count,
-            computed: 0,
-            ends_at_t_max,
+            parts,
+            part: 0,
+            segments: [Segment::default(); MAX_SEGMENTS + 1],
+            built: 0,
+            complete: false,
+            ends_at_t_max: guided_end >= t_max,
             pick,
             direct: None,
             towards: None,
@@ -203,6 +169,91 @@ impl GuidedDistance {
         self.towards = Equiangular::new(&self.ray, self.guided_end, lights);
     }
 
+    /// Builds the next segment, with its guided probability; false once every segment is
+    /// built. A segment of the guided stretch ends at the end of its equal part, or where
+    /// the ray leaves the cache's region (where guided; the last allowed segment runs to the
+    /// stretch's end); past the stretch comes the tail, which follows the exponential.
+    fn build_next(
+        &mut self,
+        medium: &Medium,
+        cache: &mut impl RadianceCache,
+        counters: &mut Counters,
+    ) -> bool {
+        if self.complete {
+            return false;
+        }
+        let k = self.built;
+        let (start, mass) = match k.checked_sub(1).map(|j| self.segments[j]) {
+            None => (0.0, self.pick),
+            Some(p) if p.start + p.length < self.guided_end => {
+                (p.start + p.length, p.mass * exp(-self.sigma * p.length))
+            }
+            Some(_) if self.ends_at_t_max => {
+                self.complete = true;
+                return false;
+            }
+            Some(_) => {
+                // The tail, from the cut on: its mass from the start, which may lie many
+                // mean free paths in.
+                let start = self.guided_end;
+                let log = Spectrum::select(
+                    self.pick.cmpgt(Spectrum::ZERO),
+                    ln(self.pick) - self.sigma * start,
+                    Spectrum::splat(f32::NEG_INFINITY),
+                );
+                self.complete = true;
+                (start, exp(log - Spectrum::splat(log.max_element())))
+            }
+        };
+        let end = if self.complete {
+            self.t_max
+        } else {
+            self.segment_end(k, start, cache)
+        };
+        let mass = Spectrum::select(mass.cmpgt(Spectrum::ZERO), mass, Spectrum::ZERO);
+        let top = mass.max_element();
+        let mass = if top > 0.0 { mass / top } else { mass };
+        let length = end - start;
+        let positive_sigma = self.sigma.cmpgt(Spectrum::ZERO);
+        let collide = if length.is_finite() {
+            Spectrum::select(positive_sigma, -exp_m1(-self.sigma * length), Spectrum::ZERO)
+        } else {
+            Spectrum::select(positive_sigma, Spectrum::ONE, Spectrum::ZERO)
+        };
+        let p_std = mass.dot(collide) / mass.element_sum();
+        self.segments[k] = Segment { start, length, mass, collide, p_std, p_guided: p_std };
+        self.built += 1;
+        if !self.complete {
+            self.compute(k, medium, cache, counters);
+        }
+        true
+    }
+
+    /// Where guided segment `k`, starting at `start`, ends.
+    fn segment_end(&mut self, k: usize, start: f32, cache: &impl RadianceCache) -> f32 {
+        if k + 1 >= MAX_SEGMENTS {
+            return self.guided_end;
+        }
+        let part_end = if self.part + 1 >= self.parts {
+            self.guided_end
+        } else {
+            self.guided_end * (self.part + 1) as f32 / self.parts as f32
+        };
+        let mut end = part_end;
+        if self.alpha > 0.0 {
+            let shortest = MIN_SEGMENT * self.guided_end;
+            // Probed a little inside, off the boundary the last segment ended on.
+            let probe = start + 0.25 * shortest;
+            let exit = probe + cache.region_exit(self.ray.at(probe), self.ray.direction);
+            end = end.min(exit.max(start + shortest));
+        }
+        if end >= part_end {
+            self.part += 1;
+            end = part_end;
+        }
+        end
+    }
+
     /// Computes the guided probability of segment `k` from the cache; nothing at `alpha` 0,
     /// where no guided probability counts, so that such flights pay for no lookup.
     fn compute(
@@ -213,8 +264,8 @@ impl GuidedDistance {
         counters: &mut Counters,
     ) {
         let s = &mut self.segments[k];
-        if s.start >= self.guided_end || self.alpha == 0.0 {
-            return; // the tail follows the standard exponential
+        if self.alpha == 0.0 {
+            return;
         }
         let mid = self.ray.at(s.start + 0.5 * s.length);
         counters.field_lookups += 1;
@@ -240,17 +291,20 @@ impl GuidedDistance {
         };
     }
 
+    /// Builds segments up to `k`; false when there is no segment `k`.
     fn ensure(
         &mut self,
         k: usize,
         medium: &Medium,
         cache: &mut impl RadianceCache,
         counters: &mut Counters,
-    ) {
-        while self.computed <= k && self.computed < self.count {
-            self.compute(self.computed, medium, cache, counters);
-            self.computed += 1;
+    ) -> bool {
+        while self.built <= k {
+            if !self.build_next(medium, cache, counters) {
+                return false;
+            }
         }
+        true
     }
 
     /// Density of the offset `x` inside segment `s` (truncated exponential).
@@ -280,7 +334,8 @@ impl GuidedDistance {
                 (Some(t), density, standard_share(s * seg.p_std, mix))
             }
             None => {
-                let (g, s) = self.survival(self.count);
+                // The draw went past every segment, so all are built.
+                let (g, s) = self.survival(self.built);
                 let mix = self.alpha * g + (1.0 - self.alpha) * s;
                 (None, mix, standard_share(s, mix))
             }
@@ -298,8 +353,8 @@ impl GuidedDistance {
         counters: &mut Counters,
     ) -> Option<(f32, usize, f32, f32)> {
         let (mut g, mut s) = (1.0f32, 1.0f32);
-        for k in 0..self.count {
-            self.ensure(k, medium, cache, counters);
+        let mut k = 0;
+        while self.ensure(k, medium, cache, counters) {
             let seg = self.segments[k];
             let p = if guided { seg.p_guided } else { seg.p_std };
             if sampler.next_1d() < p {
@@ -307,6 +362,7 @@ impl GuidedDistance {
             }
             g *= 1.0 - seg.p_guided;
             s *= 1.0 - seg.p_std;
+            k += 1;
         }
         None
     }
@@ -424,15 +480,18 @@ impl GuidedDistance {
         counters: &mut Counters,
     ) -> (f32, f32) {
         let (mut g, mut s) = (1.0f32, 1.0f32);
-        for k in 0..self.count {
-            self.ensure(k, medium, cache, counters);
+        let mut k = 0;
+        while self.ensure(k, medium, cache, counters) {
             let seg = self.segments[k];
-            if t >= seg.start && (t < seg.start + seg.length || k + 1 == self.count) {
+            // Past the last segment's end (by rounding) counts as in it.
+            let inside = t < seg.start + seg.length || !self.ensure(k + 1, medium, cache, counters);
+            if t >= seg.start && inside {
                 let offset = self.offset_pdf(&seg, t - seg.start);
                 return (g * seg.p_guided * offset, s * seg.p_std * offset);
             }
             g *= 1.0 - seg.p_guided;
             s *= 1.0 - seg.p_std;
+            k += 1;
         }
         (0.0, 0.0)
     }
@@ -456,8 +515,8 @@ impl GuidedDistance {
         cache: &mut impl RadianceCache,
         counters: &mut Counters,
     ) -> f32 {
-        self.ensure(self.count, medium, cache, counters);
-        let (g, s) = self.survival(self.count);
+        while self.build_next(medium, cache, counters) {}
+        let (g, s) = self.survival(self.built);
         self.alpha * g + (1.0 - self.alpha) * s
     }
 
@@ -757,10 +816,14 @@ struct FieldSteer<'a, C> {
     alpha: f32,
     /// Whether this flight draws its events from the guided strategy.
     guided: bool,
-    /// How far along the ray the cache's estimates stay in use.
-    refresh: f32,
-    /// The last estimates: where they were read, `L_s` and `L`.
-    cached: Option<(f32, f32, f32)>,
+    /// The shortest stretch one lookup serves (a share of the medium's stretch).
+    shortest: f32,
+    /// Up to where along the ray the last estimates hold (where the ray leaves their
+    /// region), and how many lookups the flight has made.
+    until: f32,
+    lookups: usize,
+    /// The last estimates, `L_s` and `L` (none where the cache knows nothing).
+    cached: Option<(f32, f32)>,
     /// The prefix's guided probability over its standard one.
     ratio: f32,
 }
@@ -770,14 +833,21 @@ impl<C: RadianceCache> Steer for FieldSteer<'_, C> {
         counters.guided_density_lookups += 1;
         let mut p_guided = at.p_std;
         if at.scatter > 0.0 && at.null > 0.0 {
-            if self.cached.is_none_or(|(from, _, _)| at.t - from > self.refresh) {
+            if at.t >= self.until {
                 counters.field_lookups += 1;
+                self.lookups += 1;
+                let (x, w) = (self.ray.at(at.t), self.ray.direction);
+                self.until = if self.lookups >= REFRESHES {
+                    f32::INFINITY
+                } else {
+                    at.t + self.cache.region_exit(x, w).max(self.shortest)
+                };
                 self.cached = self
                     .cache
-                    .estimates(self.ray.at(at.t), self.lookup_u, self.ray.direction, self.g)
-                    .map(|e| (at.t, e.inscattered, e.incident));
+                    .estimates(x, self.lookup_u, w, self.g)
+                    .map(|e| (e.inscattered, e.incident));
             }
-            if let Some((_, ls, li)) = self.cached {
+            if let Some((ls, li)) = self.cached {
                 let (a, b) = (at.scatter * ls, at.null * li);
                 if a + b > 0.0 && (a + b).is_finite() {
                     p_guided = (a / (a + b)).clamp(0.02, 0.98);
@@ -825,7 +895,9 @@ fn tracked_flight(
             g: medium.phase.mean_cosine(),
             alpha,
             guided: sampler.next_1d() < alpha,
-            refresh: (t1 - t0) / REFRESHES as f32,
+            shortest: MIN_SEGMENT * (t1 - t0),
+            until: f32::NEG_INFINITY,
+            lookups: 0,
             cached: None,
             ratio: 1.0,
         };

@@ -450,6 +450,9 @@ pub(crate) struct RegionLanes {
     pub(crate) inv_distance: [[f32; LANES]; MAX_LOBES / LANES],
     /// Whether any lobe has a finite source distance (else lookups skip re-aiming).
     pub(crate) parallax: bool,
+    /// The mixture's first moment, `sum_i w_i A(kappa_i) mu_i`: its mean direction, whose
+    /// length (0 to 1) says how concentrated the light is.
+    pub(crate) mean_direction: glam::Vec3,
 }
 
 impl RegionLanes {
@@ -470,7 +473,12 @@ impl RegionLanes {
             })
         });
         let parallax = inv_distance[..n].iter().any(|&d| d > 0.0);
-        Self { lobes, mean_cosine, inv_distance: inv, parallax }
+        let mean_direction = mixture
+            .lobes()
+            .iter()
+            .map(|l| l.mean * (l.weight * vmf::mean_cosine(l.kappa)))
+            .sum();
+        Self { lobes, mean_cosine, inv_distance: inv, parallax, mean_direction }
     }
 }
 
@@ -523,5 +531,36 @@ mod tests {
         assert!(prod.set_product(&base, -Vec3::Z, &[(1e6, 1.0)]));
         assert_eq!(prod.lobe(0).1, 0.0);
         assert!((prod.pdf(Vec3::X) - 1.0 / (4.0 * std::f32::consts::PI)).abs() < 1e-6);
+    }
+
+    #[test]
+    fn mean_direction_is_the_mixtures_first_moment() {
+        let cases: [&[(Vec3, f32, f32)]; 4] = [
+            &[(Vec3::Z, 0.0, 1.0)],
+            &[(Vec3::X, 40.0, 1.0)],
+            &[(Vec3::Z, 5.0, 1.0), (-Vec3::Z, 5.0, 1.0)],
+            &[(Vec3::new(0.3, 0.4, 0.87).normalize(), 1e4, 0.7), (Vec3::Y, 0.5, 0.3)],
+        ];
+        for lobes in cases {
+            let lobes: Vec<_> = lobes
+                .iter()
+                .map(|&(mean, kappa, weight)| vmf::VmfLobe { mean, kappa, weight })
+                .collect();
+            let m = crate::Mixture::new(&lobes).unwrap();
+            let got = RegionLanes::new(&m, &[0.0; MAX_LOBES]).mean_direction;
+            // The first moment by quadrature, lobe by lobe on a grid graded for it.
+            let mut want = glam::DVec3::ZERO;
+            for l in m.lobes() {
+                let grid = SphereGrid::for_lobe(l.mean.as_dvec3(), f64::from(l.kappa));
+                let f = |k: usize| {
+                    grid.integrate(&|d: DVec3| f64::from(l.weight * l.pdf(d.as_vec3())) * d[k])
+                };
+                want += DVec3::new(f(0), f(1), f(2));
+            }
+            assert!(
+                (got.as_dvec3() - want).length() < 1e-4,
+                "{lobes:?}: mean direction {got} against quadrature {want}"
+            );
+        }
     }
 }

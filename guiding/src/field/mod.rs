@@ -87,6 +87,14 @@ impl Region {
         self.lanes.lobes.pdf_shifted(dir, &self.lanes.inv_distance, self.centre - pos)
     }
 
+    /// The mixture's first moment `sum_i w_i A(kappa_i) mu_i` as fitted (without parallax): the
+    /// mean direction towards the light, of length 0 (light from everywhere alike) to 1 (from
+    /// one direction). Cheap: kept with the region, not computed per call.
+    #[inline]
+    pub fn mean_direction(&self) -> Vec3 {
+        self.lanes.mean_direction
+    }
+
     /// The fluence estimate `Phi(x)`: the mean of `radiance / pdf` over the region's samples,
     /// an unbiased estimate of the integral of incident radiance over the sphere.
     pub fn fluence(&self) -> f32 {
@@ -247,6 +255,14 @@ impl Field {
         }
         let pick = ((u.clamp(0.0, 1.0) * n as f32) as usize).min(n - 1);
         Some(candidates[pick] as usize)
+    }
+
+    /// How far from `pos` along the unit `dir` the region containing `pos` reaches (infinite
+    /// where it is unbounded that way), ignoring the spatial filter: where a sampler that
+    /// follows the regions along a ray needs its next lookup.
+    #[inline]
+    pub fn region_exit(&self, pos: Vec3, dir: Vec3) -> f32 {
+        self.tree.exit(pos, dir)
     }
 
     /// Trains the field on one pass's samples.

@@ -53,6 +53,39 @@ impl KdTree {
         }
     }
 
+    /// How far from `pos` along `dir` the leaf containing `pos` reaches: the distance to the
+    /// nearest of its bounding planes ahead (infinite where the leaf is unbounded that way).
+    /// A descent from the root, which keeps the leaf's bounds; `pos` on a split plane belongs
+    /// to the upper side, so a ray leaving downwards from it gets 0.
+    pub(crate) fn exit(&self, pos: Vec3, dir: Vec3) -> f32 {
+        let p = [pos.x, pos.y, pos.z, 0.0];
+        let (mut lo, mut hi) = ([f32::NEG_INFINITY; 4], [f32::INFINITY; 4]);
+        let mut i = 0;
+        loop {
+            let n = self.nodes[i];
+            if n.axis == LEAF {
+                break;
+            }
+            let a = usize::from(n.axis & 3);
+            let upper = p[a] >= n.split;
+            if upper {
+                lo[a] = n.split;
+            } else {
+                hi[a] = n.split;
+            }
+            i = n.child as usize + usize::from(upper);
+        }
+        let d = [dir.x, dir.y, dir.z];
+        (0..3)
+            .filter_map(|a| match d[a] {
+                x if x > 0.0 => Some((hi[a] - p[a]) / x),
+                x if x < 0.0 => Some((lo[a] - p[a]) / x),
+                _ => None,
+            })
+            .fold(f32::INFINITY, f32::min)
+            .max(0.0)
+    }
+
     /// Turns leaf `node` into an inner node; its lower half keeps region `lower`, its upper
     /// half gets region `upper`.
     pub(crate) fn split(&mut self, node: usize, axis: usize, split: f32, lower: u32, upper: u32) {
@@ -206,6 +239,38 @@ mod tests {
             t.split(leaf, axis, p[axis], region as u32, r as u32);
         }
         t
+    }
+
+    #[test]
+    fn exits_are_where_a_ray_leaves_its_leaf() {
+        let tree = random_tree(60, 7);
+        let mut state = 11u64;
+        let mut next = move || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 40) as f32 / (1u64 << 24) as f32
+        };
+        let mut checked = 0;
+        for _ in 0..2000 {
+            let pos = Vec3::new(next(), next(), next()) * 10.0 - 5.0;
+            let dir = Vec3::new(next(), next(), next()) * 2.0 - 1.0;
+            let Some(dir) = dir.try_normalize() else { continue };
+            let (leaf, _) = tree.lookup(pos);
+            let t = tree.exit(pos, dir);
+            assert!(t >= 0.0, "{t}");
+            if !t.is_finite() {
+                continue;
+            }
+            // Just before the exit the ray is still in the leaf, just after it is not.
+            let (before, after) = (pos + dir * (t - 1e-3).max(0.0), pos + dir * (t + 1e-3));
+            assert_eq!(tree.lookup(before).0, leaf, "{pos} {dir} {t}");
+            assert_ne!(tree.lookup(after).0, leaf, "{pos} {dir} {t}");
+            checked += 1;
+        }
+        assert!(checked > 1000, "{checked}");
+        // One leaf covers everything: no exit.
+        assert_eq!(KdTree::new().exit(Vec3::ZERO, Vec3::X), f32::INFINITY);
     }
 
     #[test]
