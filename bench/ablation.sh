@@ -5,6 +5,7 @@
 # --no-curve`). Not part of CI: about SECONDS x SEEDS x 9 per scene (13.5 min at the defaults).
 # Usage: bench/ablation.sh [SECONDS] [SEEDS] [SCENES] [REFERENCE_SECONDS]
 #        (defaults 30, 3, every bench scene, 180; SCENES comma-separated names of scenes/bench)
+#        ZEROVAR=path runs that binary instead of building target/release/zerovar.
 # References are bench/run.sh's (bench/out/<scene>/reference.exr) where they exist, else rendered
 # for REFERENCE_SECONDS into the same place. Writes bench/out/<scene>/ablation/ and the section
 # "Ablation" of bench/RESULTS.md (every scene with an ablation in bench/out), and prints it.
@@ -14,8 +15,11 @@ seconds=${1:-30}
 seeds=${2:-3}
 scenes=${3:-}
 ref_time=${4:-180}
-cargo build --release --quiet --bin zerovar
-bin=target/release/zerovar
+bin=${ZEROVAR:-}
+if [ -z "$bin" ]; then
+  cargo build --release --quiet --bin zerovar
+  bin=target/release/zerovar
+fi
 if [ -z "$scenes" ]; then
   scenes=$(ls scenes/bench | sed -n 's/\.\(toml\|xml\)$//p' | sort -u | paste -sd, -)
 fi
