@@ -205,11 +205,7 @@ impl GuidedDistance {
                 (start, exp(log - Spectrum::splat(log.max_element())))
             }
         };
-        let end = if self.complete {
-            self.t_max
-        } else {
-            self.segment_end(k, start, cache)
-        };
+        let end = if self.complete { self.t_max } else { self.segment_end(k, start, cache) };
         let mass = Spectrum::select(mass.cmpgt(Spectrum::ZERO), mass, Spectrum::ZERO);
         let top = mass.max_element();
         let mass = if top > 0.0 { mass / top } else { mass };

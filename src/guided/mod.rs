@@ -574,7 +574,10 @@ mod tests {
             let to_fluence = 4.0 * std::f64::consts::PI / n as f64 / f64::from(fluence);
             let (total, ours, isotropic) =
                 (total * to_fluence, ours * to_fluence, isotropic * to_fluence);
-            assert!((total - 1.0).abs() < 3e-3, "g {g}: the estimate scatters {total} of the light");
+            assert!(
+                (total - 1.0).abs() < 3e-3,
+                "g {g}: the estimate scatters {total} of the light"
+            );
             // HG about the mean direction is exact in the mean only: it loosens as g sharpens.
             let bound = if g.abs() <= 0.7 { 0.1 } else { 0.3 };
             assert!(

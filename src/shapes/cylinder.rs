@@ -26,7 +26,7 @@ impl Cylinder {
     /// mirroring.
     pub fn new(to_world: &Transform) -> Option<Self> {
         let m = to_world.matrix().matrix3;
-        let (x, y, z) = (Vec3A::from(m.x_axis), Vec3A::from(m.y_axis), Vec3A::from(m.z_axis));
+        let (x, y, z) = (m.x_axis, m.y_axis, m.z_axis);
         let (radius, ry, length) = (x.length(), y.length(), z.length());
         if !(radius > 0.0 && ry > 0.0 && length > 0.0 && radius.is_finite() && length.is_finite()) {
             return None;

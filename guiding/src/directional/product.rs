@@ -473,11 +473,8 @@ impl RegionLanes {
             })
         });
         let parallax = inv_distance[..n].iter().any(|&d| d > 0.0);
-        let mean_direction = mixture
-            .lobes()
-            .iter()
-            .map(|l| l.mean * (l.weight * vmf::mean_cosine(l.kappa)))
-            .sum();
+        let mean_direction =
+            mixture.lobes().iter().map(|l| l.mean * (l.weight * vmf::mean_cosine(l.kappa))).sum();
         Self { lobes, mean_cosine, inv_distance: inv, parallax, mean_direction }
     }
 }
