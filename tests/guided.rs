@@ -10,7 +10,7 @@ use zerovar::guided::TrainedField;
 use zerovar::guided::distance::{GuidedDistance, GuidedEvent, MAX_SEGMENTS};
 use zerovar::guided::{Components, NoCache, RadianceCache};
 use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
-use zerovar::math::{Ray, Spectrum};
+use zerovar::math::{Ray, Spectrum, luminance};
 use zerovar::media::Medium;
 use zerovar::render::{
     Budget, GuidingOptions, RenderOptions, RenderResult, TrainBudget, render, render_with_field,
@@ -628,6 +628,7 @@ fn half_guided(guide: Components) -> WalkSettings {
         alpha: 0.5,
         surface_alpha: 0.5,
         distance_alpha: 0.5,
+        collision_windows: false,
     }
 }
 
@@ -715,6 +716,55 @@ radiance = 1
         let factor = counters.walks as f64 / n as f64;
         eprintln!("cache x{scale}: {factor:.2} walks per camera path");
     }
+}
+
+#[test]
+fn weight_windows_at_collisions_split_and_roulette_without_bias() {
+    use zerovar::integrators::trace::{Continuation, Trace, TraceEvent};
+    // The cache claims a tenth of the pixel's value everywhere, and up to 16x that scattered
+    // at the top of the fog, where a blob above it reaches: collisions there are split before
+    // their next-event estimates, the camera paths' first collisions low in the fog rouletted.
+    // Roulette alone is guided, so the windows change only how often each collision is
+    // estimated, and the mean must stay the unguided one, to a standard error that would see a
+    // 1% bias.
+    let s = scene(FOG);
+    let guided = WalkSettings { collision_windows: true, ..half_guided(Components::ROULETTE) };
+    let unguided = WalkSettings { guide: Components::OFF, ..guided };
+    let n = 2_000_000;
+    let (mut reference, mut counters) = (MeanEstimate::default(), Counters::default());
+    for i in 0..n {
+        let mut none = NoCache;
+        let mut ctx = WalkContext::new(&mut none);
+        let l = camera_sample(&unguided, &s, &mut ctx, 11, i, &mut counters);
+        reference.push(f64::from(luminance(l)));
+    }
+    let pixel = reference.mean as f32;
+    let blob = Some(Vec3A::new(0.0, 3.0, 0.0));
+    let mut cache = Analytic { blob, ..Analytic::constant(pixel / 10.0) };
+    let (mut estimate, mut trace) = (MeanEstimate::default(), Trace::new());
+    let (mut split, mut rouletted) = (0, 0);
+    for i in 0..n {
+        trace.clear();
+        let mut ctx = WalkContext {
+            cache: &mut cache,
+            pixel: Some(pixel),
+            recorder: None,
+            trace: Some(&mut trace),
+        };
+        let l = camera_sample(&guided, &s, &mut ctx, 12, i, &mut counters);
+        estimate.push(f64::from(luminance(l)));
+        for event in &trace {
+            if let TraceEvent::Continue { rule: Continuation::VertexWindow, copies, .. } = *event {
+                split += usize::from(copies > 1);
+                rouletted += usize::from(copies == 0);
+            }
+        }
+    }
+    assert!(split > 1000 && rouletted > 1000, "{split} collisions split, {rouletted} rouletted");
+    let se = (estimate.std_error().powi(2) + reference.std_error().powi(2)).sqrt();
+    assert!(se < 0.0025 * reference.mean, "too little power: {estimate:?} against {reference:?}");
+    let z = (estimate.mean - reference.mean) / se;
+    assert!(z.abs() < 4.5, "windowed {estimate:?} against unguided {reference:?}: z {z:.2}");
 }
 
 const FOG: &str = r#"
@@ -1356,6 +1406,7 @@ fn guided_directions_without_windows_stop_compounding_their_weights() {
         alpha: 1.0,
         surface_alpha: 1.0,
         distance_alpha: 1.0,
+        collision_windows: false,
     };
     let mut cache = Cone { cos_max: 0.95 };
     let mut estimate = MeanEstimate::default();

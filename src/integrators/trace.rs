@@ -45,6 +45,8 @@ pub enum Strategy {
 pub enum Continuation {
     /// A weight window around the pixel estimate.
     Window,
+    /// A weight window at a medium collision, before its next-event estimate.
+    VertexWindow,
     /// The standard Russian roulette on the path weight.
     Standard,
 }

@@ -39,6 +39,7 @@ impl VolPath {
             alpha: 0.0,
             surface_alpha: 0.0,
             distance_alpha: 0.0,
+            collision_windows: false,
         }
     }
 

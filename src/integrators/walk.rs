@@ -78,6 +78,9 @@ pub struct WalkSettings {
     /// (`render::DEFAULT_DISTANCE_ALPHA`); limited like `alpha`, and zero wherever `alpha`
     /// has stopped guiding the path.
     pub distance_alpha: f32,
+    /// Weight windows also after each medium collision, before its next-event estimate
+    /// (where roulette is guided), besides the one after each direction.
+    pub collision_windows: bool,
 }
 
 /// What the walk needs to know about the pixel and the training it feeds.
@@ -126,6 +129,9 @@ struct PathState {
     /// Roulette decided at the last vertex and taken after the flight (survival probability
     /// and rule; see [`continue_path`]).
     roulette: Option<(f32, Continuation)>,
+    /// A copy split at a medium vertex before its next-event estimate and direction: the
+    /// collision's distance along `ray` and its `delta_share` (see [`Walker::vertex_window`]).
+    at_vertex: Option<(f32, f32)>,
     /// Where a split copy goes on in the training recorder's tree.
     branch: Branch,
 }
@@ -192,6 +198,7 @@ pub fn radiance<C: RadianceCache>(
         guided_gain,
         reach,
         roulette: None,
+        at_vertex: None,
         branch: Branch::default(),
     };
     let mut branches = Branches { stack: ArrayVec::new(), walks: 1 };
@@ -232,17 +239,26 @@ fn walk<C: RadianceCache>(
         Walker { settings, scene, ctx, branches, sampler, counters, l: Spectrum::ZERO, window_rr };
     let mut nulls = 0u32;
     loop {
+        // Guided decisions mix with standard sampling at `alpha`; without weight windows to
+        // split heavy paths, only until they have compounded the path's weight past
+        // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.
+        let guiding = window_rr || s.guided_gain < MAX_GUIDED_GAIN;
+        let alpha = if guiding { settings.alpha.min(MAX_ALPHA) } else { 0.0 };
+        if let Some((t, delta_share)) = s.at_vertex.take() {
+            // A copy split at a medium vertex scatters there (it is in that vertex's medium).
+            let m = s.medium.expect("a vertex copy lies in a medium");
+            let loaded = w.load(s.ray.at(t));
+            if !w.medium_scatter(&mut s, m, t, alpha, delta_share, loaded) {
+                break;
+            }
+            continue;
+        }
         w.counters.segments += 1;
         // Only a camera ray's segment is bounded (by the far clipping plane); what follows,
         // split copies included, is not.
         let reach = std::mem::replace(&mut s.reach, f32::INFINITY);
         let hit = scene.intersect(&s.ray, reach);
         let t_max = hit.as_ref().map_or(reach, |h| h.t);
-        // Guided decisions mix with standard sampling at `alpha`; without weight windows to
-        // split heavy paths, only until they have compounded the path's weight past
-        // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.
-        let guiding = window_rr || s.guided_gain < MAX_GUIDED_GAIN;
-        let alpha = if guiding { settings.alpha.min(MAX_ALPHA) } else { 0.0 };
         if let Some(m) = s.medium {
             match w.flight(&mut s, m, t_max, alpha) {
                 Flown::Scattered { t, delta_share } => {
@@ -431,9 +447,9 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         self.found(c, LightSource::ExtraCollision, s.depth, s.beta, direct.distance);
     }
 
-    /// A real scattering collision at `t` in medium `m`: next-event estimation, then a new
-    /// direction from the vertex's mixture, and roulette or splitting. False when the path
-    /// ends here.
+    /// A real scattering collision at `t` in medium `m`: the weight window on what the
+    /// vertex is expected to bring back, then [`Self::medium_scatter`] for each copy. False
+    /// when the path ends here.
     fn medium_vertex(
         &mut self,
         s: &mut PathState,
@@ -442,20 +458,92 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         alpha: f32,
         delta_share: f32,
     ) -> bool {
-        let (scene, settings) = (self.scene, self.settings);
         self.counters.medium_scatters += 1;
         s.depth += 1;
-        if settings.max_depth.is_some_and(|d| s.depth >= d) || s.beta.max_element() <= 0.0 {
+        if self.settings.max_depth.is_some_and(|d| s.depth >= d) || s.beta.max_element() <= 0.0 {
             return false;
         }
+        let loaded = self.load(s.ray.at(t));
+        if self.window_rr
+            && self.settings.collision_windows
+            && loaded
+            && !self.vertex_window(s, m, t, delta_share)
+        {
+            return false;
+        }
+        self.medium_scatter(s, m, t, alpha, delta_share, loaded)
+    }
+
+    /// Loads the cache at `p` wherever anything is guided; false where it knows nothing.
+    fn load(&mut self, p: Vec3A) -> bool {
+        let loaded = self.settings.guide.any() && self.ctx.cache.load(p, self.sampler.next_1d());
+        self.counters.field_lookups += u64::from(loaded);
+        loaded
+    }
+
+    /// The weight window after distance sampling: roulette or splitting of a path that
+    /// collided at `t` in medium `m` by what the collision is expected to bring back, the
+    /// light scattered there (the loaded cache's estimate). Split copies wait with the
+    /// collision ahead of them. False when roulette ends the path.
+    fn vertex_window(&mut self, s: &mut PathState, m: u32, t: f32, delta_share: f32) -> bool {
+        let Some(pixel) = self.ctx.pixel else { return true };
+        let g = self.scene.media[m as usize].phase.mean_cosine();
+        let cache = &*self.ctx.cache;
+        // The same robust floor as the window after direction sampling (`adjoint`).
+        let adjoint = cache.inscattered(s.ray.direction, g).max(cache.mean_radiance());
+        let q = window::factor(luminance(s.beta), adjoint, pixel);
+        if q == 1.0 {
+            return true;
+        }
+        let room =
+            self.branches.stack.remaining_capacity().min(MAX_WALKS - self.branches.walks + 1);
+        // Limiting q itself (not the rounded count) to the room left keeps E[n] / q = 1.
+        let q = q.min(room.max(1) as f32);
+        let n = window::copies(q, self.sampler.next_1d());
+        let depth = s.depth;
+        trace(self.ctx, || TraceEvent::Continue {
+            depth,
+            rule: Continuation::VertexWindow,
+            q,
+            copies: n,
+        });
+        if n == 0 {
+            return false;
+        }
+        s.beta /= q;
+        if n > 1 {
+            let mut copy = *s;
+            copy.at_vertex = Some((t, delta_share));
+            if let Some(r) = self.ctx.recorder.as_deref() {
+                copy.branch = r.branch();
+            }
+            for _ in 1..n {
+                self.branches.stack.push(copy);
+                self.branches.walks += 1;
+            }
+        }
+        true
+    }
+
+    /// What a path does at its collision at `t` in medium `m`, with the cache `loaded` there:
+    /// next-event estimation, then a new direction from the vertex's mixture, and roulette or
+    /// splitting. False when the path ends here.
+    fn medium_scatter(
+        &mut self,
+        s: &mut PathState,
+        m: u32,
+        t: f32,
+        alpha: f32,
+        delta_share: f32,
+        loaded: bool,
+    ) -> bool {
+        let (scene, settings) = (self.scene, self.settings);
         let (p, dir) = (s.ray.at(t), s.ray.direction);
         let phase = scene.media[m as usize].phase;
         let g = phase.mean_cosine();
         let guide = settings.guide;
-        let loaded = guide.any() && self.ctx.cache.load(p, self.sampler.next_1d());
         let product =
             guide.directions && alpha > 0.0 && loaded && self.ctx.cache.product_hg(dir, g);
-        self.counters.field_lookups += u64::from(loaded);
         if product && g.abs() >= EXACT_PRODUCT_MIN_G {
             self.counters.products += 1;
         } else if product && g.abs() >= PRODUCT_MIN_G {

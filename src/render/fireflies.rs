@@ -248,6 +248,7 @@ fn weight_makers(events: &[TraceEvent]) -> String {
             TraceEvent::Continue { depth, rule, q, copies } if copies > 0 && q <= 0.5 => {
                 let rule = match rule {
                     Continuation::Window => "window",
+                    Continuation::VertexWindow => "vertex window",
                     Continuation::Standard => "rr",
                 };
                 Some(format!("{rule}@{depth} x{:.1}", 1.0 / q))

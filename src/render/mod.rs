@@ -344,6 +344,7 @@ fn walk_settings(scene: &Scene, options: &RenderOptions) -> WalkSettings {
         alpha: options.guiding.alpha,
         surface_alpha: options.guiding.surface_alpha,
         distance_alpha: options.guiding.distance_alpha,
+        collision_windows: options.guiding.collision_windows,
         ..VolPath::from_scene(scene).settings()
     }
 }

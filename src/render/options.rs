@@ -52,6 +52,10 @@ pub struct GuidingOptions {
     /// standard tracking, in [0, [`MAX_ALPHA`]] ([`DEFAULT_DISTANCE_ALPHA`]); guided flights
     /// take their extra collisions for delta lights whatever it is.
     pub distance_alpha: f32,
+    /// Weight windows also after each medium collision, before its next-event estimate,
+    /// besides the one after each direction (needs roulette guided). Off by default: at equal
+    /// time on the tuning scenes they cost more than they saved (see docs/experiments.md).
+    pub collision_windows: bool,
     /// Training budget.
     pub train: TrainBudget,
     /// Settings of a new field.
@@ -84,6 +88,7 @@ impl Default for GuidingOptions {
             alpha: 0.5,
             surface_alpha: DEFAULT_SURFACE_ALPHA,
             distance_alpha: DEFAULT_DISTANCE_ALPHA,
+            collision_windows: false,
             train: TrainBudget::Share(DEFAULT_TRAIN_SHARE),
             field: FieldConfig::default(),
             combine_training: true,
@@ -186,6 +191,9 @@ impl GuidingOptions {
         if c.distances && self.alpha == 0.0 {
             return Err(OptionsError::DistancesUnguided);
         }
+        if self.collision_windows && !c.roulette {
+            return Err(OptionsError::CollisionWindowsUnguided);
+        }
         match self.train {
             TrainBudget::Passes(n) if n == 0 || n > MAX_TRAIN_PASSES => {
                 Err(OptionsError::TrainPasses(n))
@@ -262,6 +270,11 @@ pub enum OptionsError {
         "distances are guided at alpha 0, so none would be (guided flights, extra collisions included, come with the media's guided share): give a positive alpha, or leave distances out of --guiding"
     )]
     DistancesUnguided,
+    /// Collision windows asked for without guided roulette, which they are part of.
+    #[error(
+        "collision-windows on needs guided roulette: add rr to --guiding (full and auto include it), or leave collision-windows off"
+    )]
+    CollisionWindowsUnguided,
     /// A number of training passes outside 1..=[`MAX_TRAIN_PASSES`].
     #[error("train-passes {0}: give 1 to 20 (pass k renders 2^k spp)")]
     TrainPasses(u32),

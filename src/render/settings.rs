@@ -110,6 +110,22 @@ pub const SETTINGS: &[Setting] = &[
         },
     },
     Setting {
+        key: "collision-windows",
+        value: "ON|OFF",
+        help: "Weight windows also after each medium collision, before its next-event \
+               estimate, besides the one after each direction (on; needs rr guided), or after \
+               directions only [default: off, which was the faster on the tuning scenes]",
+        trains: true,
+        set: |o, v| {
+            o.collision_windows = match v.trim() {
+                "on" => true,
+                "off" => false,
+                _ => return Err("give on or off"),
+            };
+            Ok(())
+        },
+    },
+    Setting {
         key: "train-share",
         value: "F",
         help: "Share of the budget (--time or --spp) that training takes, in (0, 1): doubling \
@@ -238,6 +254,7 @@ mod tests {
             ("alpha", "0.6"),
             ("surface-alpha", "0.3"),
             ("distance-alpha", "0.2"),
+            ("collision-windows", "on"),
             ("train-share", "0.4"),
             ("train-passes", "3"),
             ("train-time", "1.5"),
@@ -262,7 +279,7 @@ mod tests {
     /// settings that choose one thing twice are refused together.
     #[test]
     fn rules_and_conflicts_are_refused() {
-        let cases: [(&[(&str, &str)], &str); 7] = [
+        let cases: [(&[(&str, &str)], &str); 8] = [
             (&[("alpha", "1.5")], "alpha 1.5: give a probability in [0, 0.8]"),
             (&[("surface-alpha", "0.9")], "surface-alpha 0.9"),
             (&[("distance-alpha", "-1")], "distance-alpha -1"),
@@ -270,6 +287,10 @@ mod tests {
             (&[("train-share", "1")], "train-share 1"),
             (&[("train-share", "0.2"), ("train-time", "3")], "train-share and train-time both"),
             (&[("alpha", "0.2"), ("alpha", "0.3")], "alpha is given twice"),
+            (
+                &[("guiding", "directions"), ("collision-windows", "on")],
+                "collision-windows on needs guided roulette",
+            ),
         ];
         for (settings, needle) in cases {
             let e = GuidingOptions::auto().apply(settings.iter().copied()).unwrap_err();

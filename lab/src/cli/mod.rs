@@ -82,9 +82,9 @@ struct CompareArgs {
     #[command(flatten)]
     budget: BudgetArgs,
     /// A method: NAME=key:value,... with the guiding flags as keys (guiding, alpha,
-    /// surface-alpha, distance-alpha, train-share, train-passes, train-time, training-images,
-    /// parallax) and tracker (repeatable) [default: unguided, guided=guiding:full and
-    /// auto=guiding:auto].
+    /// surface-alpha, distance-alpha, collision-windows, train-share, train-passes, train-time,
+    /// training-images, parallax) and tracker (repeatable) [default: unguided,
+    /// guided=guiding:full and auto=guiding:auto].
     #[arg(long, value_name = "NAME=OPTIONS")]
     method: Vec<String>,
     /// Directory for the tables and images.
