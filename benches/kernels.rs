@@ -1,5 +1,5 @@
 //! The hot kernels of a guided walk: Henyey-Greenstein sampling, one free flight through the
-//! cloud per tracker, a shadow ray's transmittance through the cloud, guided distance sampling
+//! cloud per tracker and steered by a trained field, a shadow ray's transmittance through the cloud, guided distance sampling
 //! along a camera ray of the fog room with a trained field (the ray's intersection included),
 //! and one whole camera path, unguided and fully guided. `cargo bench --bench kernels`. (Whole paths per tracker: `--bench tracking`; vMF products
 //! and field lookups: `cargo bench -p zerovar-guiding`.)
@@ -9,7 +9,7 @@ use glam::{Vec2, Vec3A};
 use std::hint::black_box;
 use std::path::Path;
 use std::time::Duration;
-use zerovar::guided::distance::{GuidedDistance, SEGMENTS};
+use zerovar::guided::distance::{GuidedDistance, SEGMENTS, guided_flight};
 use zerovar::guided::{Components, FieldCache, NoCache, RadianceCache, TrainedField};
 use zerovar::integrators::walk::{PathStart, WalkContext, WalkSettings, radiance};
 use zerovar::integrators::{VolPath, shadow_transmittance};
@@ -108,6 +108,33 @@ fn free_flight(c: &mut Criterion) {
             })
         });
     }
+    // The guided flight, steered towards the zero-variance collision density at distance
+    // alpha 0.5 with a trained field, over the medium's delta tracking: against `delta` and
+    // `decomposition` above, what steering costs.
+    let field = trained(&scene);
+    let mut cache = FieldCache::with_direct(&field.field, field.direct.as_ref(), false);
+    let mut s = Sampler::new(5, 0, 0);
+    let mut counters = Counters::default();
+    let centre = Vec3A::new(0.0, 1.2, 0.0);
+    group.bench_function("guided-steered-delta", |b| {
+        b.iter(|| {
+            let dir = zerovar::math::uniform_sphere(s.next_2d());
+            let ray = Ray::new(centre, dir);
+            let t_max = scene.intersect(&ray, f32::INFINITY).map_or(10.0, |h| h.t);
+            black_box(guided_flight(
+                medium,
+                Tracker::Delta,
+                &ray,
+                t_max,
+                Vec3A::ONE,
+                0.5,
+                None,
+                &mut cache,
+                &mut s,
+                &mut counters,
+            ))
+        })
+    });
     group.finish();
 }
 
