@@ -93,23 +93,7 @@ def main():
         lines += scene_table(title, results) + [""]
     section = "\n".join(lines).rstrip("\n") + "\n"
     print(section)
-    write_section(pathlib.Path(a.results), section)
-
-
-def write_section(path, section):
-    """Replaces the `## Ablation` section of `path` (up to the next `## ` heading), or appends
-    it."""
-    text = path.read_text() if path.exists() else ""
-    lines = text.split("\n")
-    start = next((i for i, l in enumerate(lines) if l.strip() == "## Ablation"), None)
-    if start is None:
-        text = text.rstrip("\n") + "\n\n" + section
-    else:
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")),
-                   len(lines))
-        rest = "\n".join(lines[end:])
-        text = "\n".join(lines[:start]) + "\n" + section + ("\n" + rest if rest else "")
-    path.write_text(text)
+    tables.write_section(a.results, "Ablation", section)
 
 
 if __name__ == "__main__":

@@ -97,6 +97,23 @@ def scored(e, excess):
     return n["excess"]["all"] if excess and n is not None else e["rel_mse"]["all"]
 
 
+def write_section(path, heading, section):
+    """Replaces the section `## heading` of the Markdown file `path` (up to the next `## `
+    heading or the end) with `section`, or appends it; a missing file is created."""
+    path = pathlib.Path(path)
+    text = path.read_text() if path.exists() else ""
+    lines = text.split("\n")
+    start = next((i for i, l in enumerate(lines) if l.strip() == f"## {heading}"), None)
+    if start is None:
+        text = text.rstrip("\n") + "\n\n" + section
+    else:
+        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")),
+                   len(lines))
+        rest = "\n".join(lines[end:])
+        text = "\n".join(lines[:start]) + "\n" + section + ("\n" + rest if rest else "")
+    path.write_text(text)
+
+
 def scene_names(scenes_dir):
     """bench/run.sh's scenes: every *.toml, and every *.xml with no .toml of the same name."""
     names = {p.stem for p in scenes_dir.glob("*.toml")}

@@ -40,6 +40,9 @@ import numpy as np
 import OpenEXR
 import Imath
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import tables  # noqa: E402  (bench/tables.py: the section writer RESULTS.md shares)
+
 BLOCK = 8
 # Fewest rounds (runs per mode) per scene: with 8, a t beyond 4 has p 0.005 rather than 0.057
 # with 3, and the conversion to z below takes care of the rest.
@@ -237,7 +240,7 @@ def main():
                   f"{r['block_over4']} of {nb} over 4", file=sys.stderr)
     section = table(rows, a)
     print(section)
-    write_section(a.results, section)
+    tables.write_section(a.results, "Unbiasedness", section)
 
 
 def table(rows, a):
@@ -270,21 +273,6 @@ def table(rows, a):
     lines.append(f"{len(bad)} of {len(rows)} scene-mode pairs with |z| > 4"
                  + (": " + ", ".join(f"{r['scene']} {r['mode']}" for r in bad) if bad else "."))
     return "\n".join(lines) + "\n"
-
-
-def write_section(path, section):
-    """Replaces the `## Unbiasedness` section of `path` (up to the next `## ` heading or the
-    end), or appends it."""
-    text = open(path).read() if os.path.exists(path) else ""
-    lines = text.split("\n")
-    start = next((i for i, l in enumerate(lines) if l.strip() == "## Unbiasedness"), None)
-    if start is None:
-        text = text.rstrip("\n") + "\n\n" + section
-    else:
-        end = next((i for i in range(start + 1, len(lines)) if lines[i].startswith("## ")), len(lines))
-        text = "\n".join(lines[:start]) + "\n" + section + ("\n" + "\n".join(lines[end:]) if end < len(lines) else "")
-    with open(path, "w") as f:
-        f.write(text)
 
 
 if __name__ == "__main__":
