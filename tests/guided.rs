@@ -236,6 +236,67 @@ fn guided_distances_cut_at_region_boundaries_follow_their_density() {
     assert_eq!(counters.field_lookups, 0);
 }
 
+/// Rays crossing many regions (up to 40 boundaries along the stretch, some all but
+/// coincident), with and without a tail past the guided stretch, for equal parts and region
+/// cuts together: every sample has a finite density, and the density still integrates to one.
+#[test]
+fn guided_distances_stay_whole_across_many_regions() {
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32
+    };
+    let media = [
+        medium_of("type = \"homogeneous\"\nsigma_t = 0.8\nalbedo = 0.7"),
+        medium_of("type = \"homogeneous\"\nsigma_t = [0.3, 0.8, 2.0]\nalbedo = 0.9"),
+    ];
+    let ray = Ray::new(Vec3A::new(0.0, 3.0, 3.0), Vec3A::X);
+    for case in 0..120 {
+        let medium = &media[case % 2];
+        // Stretches within the ray and cut short of it (a tail), and an unbounded ray.
+        let t_max = match case % 3 {
+            0 => 2.0 + 4.0 * next(),
+            1 => 15.0 + 10.0 * next(),
+            _ => f32::INFINITY,
+        };
+        let n = 1 + (next() * 40.0) as usize;
+        let mut cuts: Vec<f32> = (0..n).map(|_| 12.0 * next()).collect();
+        if n > 2 {
+            cuts[1] = cuts[0] + 1e-6;
+        }
+        let cuts: &'static [f32] = Box::leak(cuts.into_boxed_slice());
+        let alpha = [0.3f32, 1.0][case % 2];
+        let parts = [1, 3, MAX_SEGMENTS][(case / 2) % 3];
+        let cache =
+            Analytic { blob: Some(Vec3A::new(2.2, 3.0, 3.0)), cuts, ..Analytic::constant(1.0) };
+        let pick = Vec3A::new(0.2, 0.5, 0.3);
+        let what = format!("case {case}: t_max {t_max}, {n} cuts, alpha {alpha}, {parts} parts");
+        let state = RefCell::new((
+            GuidedDistance::new(medium, &ray, t_max, pick, alpha, 0.5, parts).unwrap(),
+            cache,
+        ));
+        let mut sampler = Sampler::new(7, case as u64, 0);
+        for _ in 0..200 {
+            let (d, c) = &mut *state.borrow_mut();
+            let (t, p, share) = d.sample(medium, c, &mut sampler, &mut Counters::default());
+            assert!(p.is_finite() && p > 0.0 && share.is_finite(), "{what}: {t:?} {p} {share}");
+        }
+        let pdf = |t: f64| {
+            let (d, c) = &mut *state.borrow_mut();
+            d.pdf(t as f32, medium, c, &mut Counters::default()) as f64
+        };
+        let pass = {
+            let (d, c) = &mut *state.borrow_mut();
+            d.pass_probability(medium, c, &mut Counters::default()) as f64
+        };
+        let end = if t_max.is_finite() { f64::from(t_max) } else { 60.0 };
+        let total = integrate_1d(&pdf, 0.0, end, 4096) + pass;
+        assert!((total - 1.0).abs() < 2e-3, "{what}: density integrates to {total}");
+    }
+}
+
 /// A point light for equiangular extra collisions.
 fn point(position: Vec3A) -> zerovar::lights::PointLight {
     zerovar::lights::PointLight { position, cone: None }

@@ -93,7 +93,10 @@ pub struct GuidedDistance {
     /// Segments built so far: lazily, only as far as the walk goes (the incremental CDF).
     segments: [Segment; MAX_SEGMENTS + 1],
     built: usize,
-    /// Whether the last segment is built.
+    /// Where the last built segment of the guided stretch ends, and whether it ends the
+    /// stretch; whether the last segment (the stretch's, or the tail) is built.
+    reached: f32,
+    stretch_done: bool,
     complete: bool,
     /// Whether the guided stretch reached the end of the ray (no tail segment).
     ends_at_t_max: bool,
@@ -154,6 +157,8 @@ impl GuidedDistance {
             part: 0,
             segments: [Segment::default(); MAX_SEGMENTS + 1],
             built: 0,
+            reached: 0.0,
+            stretch_done: false,
             complete: false,
             ends_at_t_max: guided_end >= t_max,
             pick,
@@ -183,29 +188,32 @@ impl GuidedDistance {
             return false;
         }
         let k = self.built;
-        let (start, mass) = match k.checked_sub(1).map(|j| self.segments[j]) {
-            None => (0.0, self.pick),
-            Some(p) if p.start + p.length < self.guided_end => {
-                (p.start + p.length, p.mass * exp(-self.sigma * p.length))
-            }
-            Some(_) if self.ends_at_t_max => {
-                self.complete = true;
-                return false;
-            }
-            Some(_) => {
-                // The tail, from the cut on: its mass from the start, which may lie many
-                // mean free paths in.
-                let start = self.guided_end;
-                let log = Spectrum::select(
-                    self.pick.cmpgt(Spectrum::ZERO),
-                    ln(self.pick) - self.sigma * start,
-                    Spectrum::splat(f32::NEG_INFINITY),
-                );
-                self.complete = true;
-                (start, exp(log - Spectrum::splat(log.max_element())))
-            }
+        let (start, end, mass) = if !self.stretch_done {
+            // A segment of the guided stretch, from where the last one ended.
+            let start = self.reached;
+            let mass = match k.checked_sub(1) {
+                None => self.pick,
+                Some(j) => self.segments[j].mass * exp(-self.sigma * self.segments[j].length),
+            };
+            let end = self.segment_end(k, start, cache);
+            self.stretch_done = end >= self.guided_end;
+            self.reached = end;
+            (start, end, mass)
+        } else if self.ends_at_t_max {
+            self.complete = true;
+            return false;
+        } else {
+            // The tail, from the cut on: its mass from the start, which may lie many mean
+            // free paths in.
+            let start = self.guided_end;
+            let log = Spectrum::select(
+                self.pick.cmpgt(Spectrum::ZERO),
+                ln(self.pick) - self.sigma * start,
+                Spectrum::splat(f32::NEG_INFINITY),
+            );
+            self.complete = true;
+            (start, self.t_max, exp(log - Spectrum::splat(log.max_element())))
         };
-        let end = if self.complete { self.t_max } else { self.segment_end(k, start, cache) };
         let mass = Spectrum::select(mass.cmpgt(Spectrum::ZERO), mass, Spectrum::ZERO);
         let top = mass.max_element();
         let mass = if top > 0.0 { mass / top } else { mass };
@@ -225,7 +233,8 @@ impl GuidedDistance {
         true
     }
 
-    /// Where guided segment `k`, starting at `start`, ends.
+    /// Where guided segment `k`, starting at `start`, ends: exactly at the stretch's end for
+    /// the last one.
     fn segment_end(&mut self, k: usize, start: f32, cache: &impl RadianceCache) -> f32 {
         if k + 1 >= MAX_SEGMENTS {
             return self.guided_end;
