@@ -495,34 +495,9 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         if q == 1.0 {
             return true;
         }
-        let room =
-            self.branches.stack.remaining_capacity().min(MAX_WALKS - self.branches.walks + 1);
-        // Limiting q itself (not the rounded count) to the room left keeps E[n] / q = 1.
-        let q = q.min(room.max(1) as f32);
-        let n = window::copies(q, self.sampler.next_1d());
-        let depth = s.depth;
-        trace(self.ctx, || TraceEvent::Continue {
-            depth,
-            rule: Continuation::VertexWindow,
-            q,
-            copies: n,
-        });
-        if n == 0 {
-            return false;
-        }
-        s.beta /= q;
-        if n > 1 {
-            let mut copy = *s;
-            copy.at_vertex = Some((t, delta_share));
-            if let Some(r) = self.ctx.recorder.as_deref() {
-                copy.branch = r.branch();
-            }
-            for _ in 1..n {
-                self.branches.stack.push(copy);
-                self.branches.walks += 1;
-            }
-        }
-        true
+        let at = Some((t, delta_share));
+        let (ctx, branches) = (&mut *self.ctx, &mut *self.branches);
+        split(s, q, Continuation::VertexWindow, at, ctx, branches, self.sampler) > 0
     }
 
     /// What a path does at its collision at `t` in medium `m`, with the cache `loaded` there:
@@ -932,27 +907,14 @@ fn continue_path<C>(
     if adjoint > 0.0
         && let Some(pixel) = ctx.pixel
     {
-        let mut q = window::factor(luminance(s.beta), adjoint, pixel);
+        let q = window::factor(luminance(s.beta), adjoint, pixel);
         if glow && q < 1.0 {
             s.roulette = Some((q, Continuation::Window));
             return true;
         }
-        let room = branches.stack.remaining_capacity().min(MAX_WALKS - branches.walks + 1);
-        // Limiting q itself (not the rounded count) to the room left keeps E[n] / q = 1.
-        q = q.min(room.max(1) as f32);
-        let n = window::copies(q, sampler.next_1d());
-        let depth = s.depth;
-        trace(ctx, || TraceEvent::Continue { depth, rule: Continuation::Window, q, copies: n });
+        let n = split(s, q, Continuation::Window, None, ctx, branches, sampler);
         if n == 0 {
             return false;
-        }
-        s.beta /= q;
-        if let Some(r) = ctx.recorder.as_deref() {
-            s.branch = r.branch();
-        }
-        for _ in 1..n {
-            branches.stack.push(*s);
-            branches.walks += 1;
         }
         // A window that keeps returning 1 (an albedo-1 medium, a flat cache) must not make a
         // walk endless: deep paths get the standard roulette as well.
@@ -968,6 +930,40 @@ fn continue_path<C>(
         return true;
     }
     survives(s, q, Continuation::Standard, ctx, sampler)
+}
+
+/// Roulette or splitting by a weight window's factor `q` (the expected number of walks that go
+/// on), limited to the room left for walks: each goes on with weight `1 / q`, the copies from
+/// the stack, resuming at the collision `at` ahead of them (its distance and `delta_share`) or
+/// with the next segment. Returns how many go on, the path itself among them (0: it ends).
+fn split<C>(
+    s: &mut PathState,
+    q: f32,
+    rule: Continuation,
+    at: Option<(f32, f32)>,
+    ctx: &mut WalkContext<'_, C>,
+    branches: &mut Branches,
+    sampler: &mut Sampler,
+) -> u32 {
+    let room = branches.stack.remaining_capacity().min(MAX_WALKS - branches.walks + 1);
+    // Limiting q itself (not the rounded count) to the room left keeps E[n] / q = 1.
+    let q = q.min(room.max(1) as f32);
+    let n = window::copies(q, sampler.next_1d());
+    let depth = s.depth;
+    trace(ctx, || TraceEvent::Continue { depth, rule, q, copies: n });
+    if n == 0 {
+        return 0;
+    }
+    s.beta /= q;
+    if let Some(r) = ctx.recorder.as_deref() {
+        s.branch = r.branch();
+    }
+    let copy = PathState { at_vertex: at, ..*s };
+    for _ in 1..n {
+        branches.stack.push(copy);
+        branches.walks += 1;
+    }
+    n
 }
 
 /// Roulette with survival probability `q` by `rule`: survivors are weighted by `1 / q`.
