@@ -1,7 +1,8 @@
 //! The hot kernels of a guided walk: Henyey-Greenstein sampling, one free flight through the
-//! cloud per tracker and steered by a trained field, a shadow ray's transmittance through the cloud, guided distance sampling
-//! along a camera ray of the fog room with a trained field (the ray's intersection included),
-//! and one whole camera path, unguided and fully guided. `cargo bench --bench kernels`. (Whole paths per tracker: `--bench tracking`; vMF products
+//! cloud per tracker and steered by a trained field, a shadow ray's transmittance through the
+//! cloud, guided distance sampling along a camera ray of the fog room with a trained field
+//! (the ray's intersection included), and one whole camera path, unguided and fully guided.
+//! `cargo bench --bench kernels`. (Whole paths per tracker: `--bench tracking`; vMF products
 //! and field lookups: `cargo bench -p zerovar-guiding`.)
 
 use criterion::{Criterion, criterion_group, criterion_main};

@@ -50,8 +50,9 @@ pub const SEGMENTS: usize = 1;
 /// runs to the stretch's end, so a ray through many small regions costs at most this many
 /// lookups.
 pub const MAX_SEGMENTS: usize = 8;
-/// The shortest segment a region boundary may cut, as a share of the guided stretch: a ray
-/// grazing a region's corner is not worth a lookup.
+/// The shortest segment a region boundary may cut, as a share of the guided stretch (of a
+/// heterogeneous flight's stretch through the medium, for its refreshes): a ray grazing a
+/// region's corner is not worth a lookup.
 const MIN_SEGMENT: f32 = 1.0 / 32.0;
 /// How many times a heterogeneous flight refreshes its cache estimates along the medium's
 /// stretch at most: once per region its tentative collisions reach, up to this.
@@ -468,7 +469,8 @@ impl GuidedDistance {
         }
     }
 
-    /// Both strategies' probabilities of reaching segment `k` (of passing, for `count`).
+    /// Both strategies' probabilities of reaching segment `k` (of passing, for `self.built`
+    /// once every segment is built).
     fn survival(&self, k: usize) -> (f32, f32) {
         self.segments[..k]
             .iter()

@@ -363,8 +363,8 @@ impl RadianceCache for FieldCache<'_> {
     }
     #[inline]
     fn estimates(&mut self, x: Vec3A, u: f32, w: Vec3A, g: f32) -> Option<Estimates> {
-        // Straight from the region, without loading its mixture: a heterogeneous flight's
-        // refreshes mostly fall in one region, so the last answer is kept too.
+        // Straight from the region, without loading its mixture. The last answer is kept too:
+        // the spatial filter may map a refresh, or the next flight's start, to the same region.
         let i = self.field.lookup_index(x.into(), u)?;
         if let Some((j, v, gm, e)) = self.memo
             && j == i
@@ -376,8 +376,8 @@ impl RadianceCache for FieldCache<'_> {
         let region = &self.field.regions()[i];
         let (fluence, axis) = self.direct.map_or((0.0, Vec3A::ZERO), |d| (d.get(i), d.axis(i)));
         // Both parts scatter about their mean directions, the field's own (indirect) part from
-        // its mixture's first moment: an order of magnitude cheaper than the mixture's exact
-        // HG convolution per segment, and exact in its mean.
+        // its mixture's first moment: cheaper than the mixture's exact HG convolution per
+        // segment (a lobe-by-lobe sum), and exact in its mean.
         let e = Estimates {
             incident: region.fluence() * region.density_at(x.into(), w.into()),
             inscattered: inscattered_about(region.fluence(), region.mean_direction().into(), w, g)

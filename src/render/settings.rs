@@ -114,7 +114,7 @@ pub const SETTINGS: &[Setting] = &[
         value: "ON|OFF",
         help: "Weight windows also after each medium collision, before its next-event \
                estimate, besides the one after each direction (on; needs rr guided), or after \
-               directions only [default: off, which was the faster on the tuning scenes]",
+               directions only [default: off; see docs/experiments.md]",
         trains: true,
         set: |o, v| {
             o.collision_windows = match v.trim() {
