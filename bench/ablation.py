@@ -2,7 +2,7 @@
 """The section "Ablation" of bench/RESULTS.md, for bench/ablation.sh (standard library only).
 
     python3 bench/ablation.py OUT_DIR [--results bench/RESULTS.md] [--seconds S] [--seeds K]
-        [--held-out bench/held-out.txt]
+        [--held-out bench/held-out.txt] [--commit C]
 
 Reads OUT_DIR/<scene>/ablation/results.json (`zerovar compare` of the nine methods) for every
 scene that has one and writes a table per scene: each method's relMSE (median over the seeds
@@ -70,21 +70,23 @@ def main():
     p.add_argument("--seconds", type=float, default=30)
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--held-out", default="bench/held-out.txt")
+    p.add_argument("--commit", help="the commit the runs' binary was built from (default HEAD)")
     a = p.parse_args()
     held_out = set(tables.held_out_names(pathlib.Path(a.held_out)) or [])
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip()
+    commit = a.commit or subprocess.run(["git", "rev-parse", "--short", "HEAD"],
+                                        capture_output=True, text=True).stdout.strip()
+    scenes = sorted(f.parent.parent.name for f in pathlib.Path(a.out).glob("*/ablation/results.json"))
     lines = [
         "## Ablation",
         "",
         f"`bench/ablation.sh {a.seconds:g} {a.seeds}` on {date} at {commit}: each guided decision "
         "alone and each removed from full guiding, at equal time (training included), every "
         f"method once per seed ({a.seeds} seeds), against the scene's reference. `/ full` is the "
-        "ratio of the method's median to full guiding's.",
+        "ratio of the method's median to full guiding's. Scenes: "
+        f"{', '.join(scenes)}; a bench scene without a table here has not been ablated yet.",
         "",
     ]
-    scenes = sorted(f.parent.parent.name for f in pathlib.Path(a.out).glob("*/ablation/results.json"))
     for name in scenes:
         results = tables.load_json(pathlib.Path(a.out) / name / "ablation" / "results.json")
         if not results:

@@ -5,7 +5,8 @@
 # --no-curve`). Not part of CI: about SECONDS x SEEDS x 9 per scene (13.5 min at the defaults).
 # Usage: bench/ablation.sh [SECONDS] [SEEDS] [SCENES] [REFERENCE_SECONDS]
 #        (defaults 30, 3, every bench scene, 180; SCENES comma-separated names of scenes/bench)
-#        ZEROVAR=path runs that binary instead of building target/release/zerovar.
+#        ZEROVAR=path runs that binary instead of building target/release/zerovar, and
+#        COMMIT names the commit it was built from in the table (default HEAD).
 # References are bench/run.sh's (bench/out/<scene>/reference.exr) where they exist, else rendered
 # for REFERENCE_SECONDS into the same place. Writes bench/out/<scene>/ablation/ and the section
 # "Ablation" of bench/RESULTS.md (every scene with an ablation in bench/out), and prints it.
@@ -58,4 +59,5 @@ for name in "${names[@]}"; do
     --no-curve "${args[@]}" --out "$out/ablation" > "$out/ablation.log" 2>&1 \
     || { echo "$name: compare failed, see $out/ablation.log" >&2; exit 1; }
 done
-python3 bench/ablation.py bench/out --results bench/RESULTS.md --seconds "$seconds" --seeds "$seeds"
+python3 bench/ablation.py bench/out --results bench/RESULTS.md --seconds "$seconds" --seeds "$seeds" \
+  ${COMMIT:+--commit "$COMMIT"}
