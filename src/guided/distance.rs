@@ -400,6 +400,15 @@ impl GuidedDistance {
         d
     }
 
+    /// Whether [`sample_direct`](Self::sample_direct) draws an extra collision along this
+    /// ray: always towards point lights ([`aim_at`](Self::aim_at)), and for the light of the
+    /// cache's grid only where it is concentrated along the ray (where the flight's own
+    /// collision would estimate it with a relative variance above 1).
+    pub fn takes_extra(&mut self, medium: &Medium, cache: &mut impl RadianceCache) -> bool {
+        let d = self.direct_weights(medium, cache);
+        equiangular_share(&d, self.towards.is_some()).is_some()
+    }
+
     /// Part `j` of the guided stretch as a segment (for its offsets and their density).
     fn part(&self, d: &DirectStretch, j: usize) -> Segment {
         let start = j as f32 * d.length;
@@ -555,7 +564,8 @@ impl GuidedDistance {
 ///
 /// At `alpha` 0 in a grey, non-emissive homogeneous medium the flight takes the closed form of
 /// `plain_flight`: the same densities from a quarter of the transcendental functions, so less
-/// error at equal time (see docs/experiments.md).
+/// error at equal time (see docs/experiments.md). In a chromatic one, a ray that takes no extra
+/// collision flies the medium's `tracker`, as an unguided walk does.
 #[allow(clippy::too_many_arguments)]
 pub fn guided_flight(
     medium: &Medium,
@@ -602,32 +612,26 @@ pub fn guided_flight(
     {
         // A channel that never collides must be able to escape to infinity, which the guided
         // stretch cannot express: such rays keep the standard tracker.
-        let f = crate::tracking::sample_flight(
-            medium,
-            Tracker::for_medium(medium),
-            ray,
-            t_max,
-            beta,
-            sampler,
-            counters,
-        );
-        let event = match f.event {
-            FlightEvent::Scatter { t } => GuidedEvent::Scatter { t },
-            FlightEvent::Escape => GuidedEvent::Pass,
-        };
-        return GuidedFlight { emitted: f.emitted, ..GuidedFlight::new(event, f.weight, 1.0) };
+        return standard_flight(medium, tracker, ray, t_max, beta, sampler, counters);
     }
     let MediumKind::Homogeneous { sigma_t, .. } = medium.kind else { return pass };
     let Some(mut dist) = GuidedDistance::new(medium, ray, t_max, beta, alpha, lookup_u, SEGMENTS)
     else {
         return pass;
     };
+    let extra_nee = extra_nee.filter(|_| !medium.is_emissive());
+    if let Some(points) = extra_nee {
+        dist.aim_at(points);
+    }
+    let takes_extra = extra_nee.is_some() && dist.takes_extra(medium, cache);
+    if alpha == 0.0 && !takes_extra && !medium.is_emissive() {
+        // Nothing guided along this ray: the standard tracker's closed form is cheaper than
+        // the same density through the segments.
+        return standard_flight(medium, tracker, ray, t_max, beta, sampler, counters);
+    }
     let (t, pdf, gain) = dist.sample(medium, cache, sampler, counters);
     let (mut delta_share, mut extra) = (1.0, None);
-    if let Some(points) = extra_nee
-        && !medium.is_emissive()
-    {
-        dist.aim_at(points);
+    if takes_extra {
         extra = extra_collision(&mut dist, medium, ray, cache, sampler, counters);
         if let Some(t) = t
             && positive(pdf)
@@ -656,6 +660,25 @@ pub fn guided_flight(
     }
     let w = transmittance_homogeneous(sigma_t, t) / pdf;
     emissive_collision(medium, ray, t, (beta, w), lookup_u, gain, cache, sampler, counters)
+}
+
+/// The medium's `tracker`'s flight (`tracking::sample_flight`), as an unguided walk flies it,
+/// as a guided flight's outcome.
+fn standard_flight(
+    medium: &Medium,
+    tracker: Tracker,
+    ray: &Ray,
+    t_max: f32,
+    beta: Spectrum,
+    sampler: &mut Sampler,
+    counters: &mut Counters,
+) -> GuidedFlight {
+    let f = crate::tracking::sample_flight(medium, tracker, ray, t_max, beta, sampler, counters);
+    let event = match f.event {
+        FlightEvent::Scatter { t } => GuidedEvent::Scatter { t },
+        FlightEvent::Escape => GuidedEvent::Pass,
+    };
+    GuidedFlight { emitted: f.emitted, ..GuidedFlight::new(event, f.weight, 1.0) }
 }
 
 /// `T(t) sigma_s(t)` in a homogeneous medium of extinction `sigma_t`.

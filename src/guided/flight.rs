@@ -23,10 +23,19 @@ pub(super) fn equiangular_share(d: &DirectStretch, towards: bool) -> Option<f32>
     match (d.total > 0.0 && d.total.is_finite(), towards) {
         (true, true) => Some(EQUIANGULAR_SHARE),
         (false, true) => Some(1.0),
-        (true, false) => Some(0.0),
-        (false, false) => None,
+        (true, false) if d.own_variance > MIN_OWN_VARIANCE => Some(0.0),
+        _ => None,
     }
 }
+
+/// Without point lights, a ray takes an extra collision only where the flight's own collision
+/// would estimate the grid's delta-light in-scattering along it with a relative variance above
+/// this (see [`DirectStretch::own_variance`]). Light on a share `f` of where the flight
+/// collides gives about `1 / f - 1`, so 1 means "concentrated on less than half of it" (a
+/// shaft); a medium lit all through by the sun gives nearly 0, and there an extra collision
+/// costs a shadow ray for little. The rule reads only the ray's own light, not the scene's
+/// size or brightness. Point lights always get one: the grid cannot see their `1 / r^2`.
+pub(super) const MIN_OWN_VARIANCE: f32 = 1.0;
 
 /// Parts of the guided stretch an extra collision for delta lights picks among: finer than
 /// the segments, because its cache lookups are cheap (see [`RadianceCache::direct`]).
@@ -36,6 +45,11 @@ pub(super) const DIRECT_SEGMENTS: usize = 16;
 pub(super) struct DirectStretch {
     pub(super) weights: [f32; DIRECT_SEGMENTS],
     pub(super) total: f32,
+    /// The relative variance of the estimate the flight's own (standard) collision makes of
+    /// the in-scattering the weights sum: `sum p_j D_j^2 / (sum p_j D_j)^2 - 1` over the parts'
+    /// collision probabilities `p_j` and in-scattering `D_j` (0 for light spread along the ray
+    /// as the collisions are; large for a narrow shaft).
+    pub(super) own_variance: f32,
     /// The length of a part, and per channel the probability of colliding within one.
     pub(super) length: f32,
     pub(super) collide: Spectrum,
@@ -83,6 +97,7 @@ pub(super) fn direct_stretch(
     let mut d = DirectStretch {
         weights: [0.0; DIRECT_SEGMENTS],
         total: 0.0,
+        own_variance: 0.0,
         length: h,
         collide: Spectrum::ZERO,
         decay: Spectrum::ONE,
@@ -96,12 +111,16 @@ pub(super) fn direct_stretch(
         Spectrum::select(sigma.cmpgt(Spectrum::ZERO), -exp_m1(-sigma * h), Spectrum::ZERO);
     let decay = exp(-sigma * h);
     (d.collide, d.decay) = (collide, decay);
-    let mut mass = pick;
+    let (mut mass, mut total, mut second) = (pick, 0.0, 0.0);
     for w in &mut d.weights {
-        *w = positive_or_zero(mass.dot(collide) * *w);
-        d.total += *w;
+        let direct = *w;
+        *w = positive_or_zero(mass.dot(collide) * direct);
+        total += *w;
+        second += *w * direct;
         mass *= decay;
     }
+    d.total = total;
+    d.own_variance = second / (total * total) - 1.0;
     d
 }
 
@@ -199,5 +218,97 @@ pub(super) fn per_channel(v: Spectrum, f: impl Fn(f32) -> f32) -> Spectrum {
         Spectrum::splat(f(v.x))
     } else {
         Spectrum::new(f(v.x), f(v.y), f(v.z))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::{Vec2, Vec3A};
+
+    /// Delta-light in-scattering 1 where `x` lies in `[lo, hi)`, 0 elsewhere.
+    struct Band {
+        lo: f32,
+        hi: f32,
+    }
+
+    impl RadianceCache for Band {
+        fn load(&mut self, _: Vec3A, _: f32) -> bool {
+            false
+        }
+        fn incident(&self, _: Vec3A) -> f32 {
+            0.0
+        }
+        fn mean_radiance(&self) -> f32 {
+            0.0
+        }
+        fn inscattered(&self, _: Vec3A, _: f32) -> f32 {
+            0.0
+        }
+        fn product_hg(&mut self, _: Vec3A, _: f32) -> bool {
+            false
+        }
+        fn product_cosine(&mut self, _: Vec3A) -> bool {
+            false
+        }
+        fn sample(&self, _: Vec2) -> Vec3A {
+            Vec3A::X
+        }
+        fn pdf(&self, _: Vec3A) -> f32 {
+            0.0
+        }
+        fn direct(&mut self, x: Vec3A, _: Vec3A, _: f32) -> f32 {
+            if (self.lo..self.hi).contains(&x.x) { 1.0 } else { 0.0 }
+        }
+    }
+
+    /// The relative variance of the flight's own estimate and the extra-collision rule, for
+    /// light on `[lo, hi)` of a ray through a medium of extinction `sigma` per channel.
+    fn stretch(sigma: Spectrum, lo: f32, hi: f32) -> DirectStretch {
+        let ray = Ray::new(Vec3A::ZERO, Vec3A::X);
+        let pick = Spectrum::splat(1.0 / 3.0);
+        // The guided stretch of the channels' smallest extinction, as `GuidedDistance` cuts it.
+        let end = CUT / sigma.min_element();
+        direct_stretch(&ray, end, sigma, pick, 0.0, &mut Band { lo, hi })
+    }
+
+    #[test]
+    fn extra_collisions_go_where_the_light_is_concentrated_along_the_ray() {
+        let sigma = Spectrum::splat(2.0);
+        let part = CUT / 2.0 / DIRECT_SEGMENTS as f32; // two parts are one optical depth
+        // Light on all of the stretch: the own collision's estimate is exact but for passing.
+        let all = stretch(sigma, -1.0, 100.0);
+        let expected = 1.0 / (1.0 - (-CUT).exp()) - 1.0;
+        assert!((all.own_variance - expected).abs() < 1e-4, "{}", all.own_variance);
+        assert_eq!(equiangular_share(&all, false), None);
+        // Light on the first two optical depths: 86% of collisions fall there.
+        let front = stretch(sigma, 0.0, 4.0 * part);
+        let expected = 1.0 / (1.0 - (-2.0f32).exp()) - 1.0;
+        assert!((front.own_variance - expected).abs() < 1e-3 * expected, "{}", front.own_variance);
+        assert_eq!(equiangular_share(&front, false), None);
+        // A shaft from optical depth 2 to 3: 8.6% of collisions, relative variance 10.6.
+        let shaft = stretch(sigma, 4.0 * part, 6.0 * part);
+        let mass = (-2.0f32).exp() - (-3.0f32).exp();
+        let expected = 1.0 / mass - 1.0;
+        assert!((shaft.own_variance - expected).abs() < 1e-3 * expected, "{}", shaft.own_variance);
+        assert_eq!(equiangular_share(&shaft, false), Some(0.0));
+        // Point lights always get an extra collision, with or without light in the grid.
+        assert_eq!(equiangular_share(&all, true), Some(EQUIANGULAR_SHARE));
+        assert_eq!(equiangular_share(&stretch(sigma, 50.0, 60.0), true), Some(1.0));
+        assert_eq!(equiangular_share(&stretch(sigma, 50.0, 60.0), false), None);
+    }
+
+    #[test]
+    fn a_chromatic_medium_weighs_the_light_by_each_channels_collisions() {
+        // Light on the far half of the red channel's stretch: blue, ten times as dense,
+        // collides almost only in the near half, so only a third of the collision mass
+        // (red's) sees the light.
+        let sigma = Spectrum::new(1.0, 10.0, 10.0);
+        let half = stretch(sigma, CUT / 2.0, 100.0);
+        let red = (-CUT / 2.0).exp() - (-CUT).exp();
+        let blue = (-CUT * 5.0).exp();
+        let expected = 1.0 / ((red + 2.0 * blue) / 3.0) - 1.0;
+        assert!((half.own_variance - expected).abs() < 1e-2 * expected, "{}", half.own_variance);
+        assert_eq!(equiangular_share(&half, false), Some(0.0));
     }
 }

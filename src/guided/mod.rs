@@ -47,6 +47,12 @@ impl Components {
         self.directions || self.distances || self.roulette
     }
 
+    /// Whether a scattering vertex reads the cache: for its guided direction or its weight
+    /// window. Guided distances read it along the flight instead, never at the vertex.
+    pub fn at_vertices(&self) -> bool {
+        self.directions || self.roulette
+    }
+
     /// Weight-window roulette and splitting alone.
     pub const ROULETTE: Components =
         Components { directions: false, distances: false, roulette: true };

@@ -474,9 +474,11 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         self.medium_scatter(s, m, t, alpha, delta_share, loaded)
     }
 
-    /// Loads the cache at `p` wherever anything is guided; false where it knows nothing.
+    /// Loads the cache at `p` where the vertex's decisions read it; false where it knows
+    /// nothing.
     fn load(&mut self, p: Vec3A) -> bool {
-        let loaded = self.settings.guide.any() && self.ctx.cache.load(p, self.sampler.next_1d());
+        let loaded =
+            self.settings.guide.at_vertices() && self.ctx.cache.load(p, self.sampler.next_1d());
         self.counters.field_lookups += u64::from(loaded);
         loaded
     }
@@ -677,7 +679,8 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         let guide = settings.guide;
         let smooth = at.bsdf.has_smooth_component();
         let guides = at.bsdf.guides();
-        let loaded = guides && guide.any() && self.ctx.cache.load(hit.p, self.sampler.next_1d());
+        let loaded =
+            guides && guide.at_vertices() && self.ctx.cache.load(hit.p, self.sampler.next_1d());
         self.counters.field_lookups += u64::from(loaded);
         // Surfaces have a share of their own (`render::DEFAULT_SURFACE_ALPHA`).
         let alpha = if guiding { settings.surface_alpha.min(MAX_ALPHA) } else { 0.0 };
