@@ -27,8 +27,8 @@ pub struct Counters {
     pub field_lookups: u64,
     /// Exact products of a region's mixture with a phase function.
     pub products: u64,
-    /// Approximate products: a region's lobes reweighted by the phase function.
-    pub reweighted_products: u64,
+    /// Products of a region's mixture with one vMF lobe standing in for the phase function.
+    pub lobe_products: u64,
     /// Extra collisions of guided flights for next-event estimation of delta lights.
     pub extra_collisions: u64,
 }
@@ -45,7 +45,7 @@ impl std::ops::AddAssign for Counters {
         self.invalid_samples += o.invalid_samples;
         self.field_lookups += o.field_lookups;
         self.products += o.products;
-        self.reweighted_products += o.reweighted_products;
+        self.lobe_products += o.lobe_products;
         self.extra_collisions += o.extra_collisions;
     }
 }

@@ -103,12 +103,13 @@ impl RadianceCache for Analytic {
 }
 
 /// The scenes every guided estimator must converge on.
-const SCENES: [(&str, &str); 5] = [
+const SCENES: [(&str, &str); 6] = [
     ("chromatic", CHROMATIC),
     ("fog", FOG),
     ("spot in fog", SPOT_FOG),
     ("spot in haze", SPOT_HAZE),
     ("cloud", CLOUD),
+    ("chromatic cloud", CHROMATIC_CLOUD),
 ];
 
 fn medium_of(text: &str) -> Medium {
@@ -1081,7 +1082,7 @@ resolution = [12, 10]
 type = "noise"
 scale = 8
 albedo = 0.95
-# g 0.8: guided directions take the exact product here, the reweighted lobes in FOG.
+# g 0.8: guided directions take the exact product here, the one-lobe product in FOG.
 phase = { type = "hg", g = 0.8 }
 transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }, { translate = [0, 0.5, 0] }]
 
@@ -1100,6 +1101,45 @@ angular_diameter = 2
 [[lights]]
 type = "constant"
 radiance = 0.2
+"#;
+
+/// A chromatic heterogeneous medium: spectral tracking's history-aware probabilities under
+/// steered flights, extra collisions towards a point light in the null-collision form, and
+/// guided directions at a moderate `g` (the one-lobe product).
+const CHROMATIC_CLOUD: &str = r#"
+[camera]
+origin = [0, 0.5, 4]
+target = [0, 0.5, 0]
+fov = 40
+resolution = [12, 10]
+
+[media.dye]
+type = "noise"
+scale = 5
+sigma_t = [0.4, 1, 2.5]
+albedo = [0.95, 0.85, 0.7]
+phase = { type = "hg", g = 0.5 }
+transform = [{ translate = [-0.5, -0.5, -0.5] }, { scale = 2 }, { translate = [0, 0.5, 0] }]
+
+[[shapes]]
+type = "cube"
+transform = [{ translate = [0, 0.5, 0] }]
+bsdf = { type = "null" }
+interior = "dye"
+
+[[lights]]
+type = "directional"
+direction = [-0.3, -1, -0.4]
+irradiance = 2
+
+[[lights]]
+type = "point"
+position = [0.6, 0.9, 0.3]
+intensity = 3
+
+[[lights]]
+type = "constant"
+radiance = [0.15, 0.2, 0.3]
 "#;
 
 const CHROMATIC: &str = r#"

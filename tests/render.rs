@@ -181,10 +181,10 @@ position = [0, 0.0001, 0]
 intensity = 1
 "#;
     let hard = text.replace("\n[camera]", "medium = \"thin\"\n\n[camera]");
-    // Moderate g takes the other guided-direction path (lobes reweighted by HG, not the
-    // exact product).
+    // Moderate g takes the other guided-direction path (a product with one vMF lobe standing
+    // in for HG, not the exact product).
     let moderate = hard.replace("g = 0.99 }", "g = 0.6 }").replace("g = -0.999 }", "g = -0.5 }");
-    for (s, guiding, reweighted) in [
+    for (s, guiding, lobe) in [
         (scene(&hard), Components::OFF, false),
         (scene(&hard), Components::FULL, false),
         (scene(&moderate), Components::FULL, true),
@@ -200,7 +200,7 @@ intensity = 1
         );
         assert!(r.image.iter().flatten().all(|v| v.is_finite() && *v >= 0.0));
         assert!(r.film.average().iter().any(|v| *v > 0.0), "the hard case rendered black");
-        assert_eq!(r.counters.reweighted_products > 0, reweighted, "{:?}", r.counters);
+        assert_eq!(r.counters.lobe_products > 0, lobe, "{:?}", r.counters);
     }
 }
 

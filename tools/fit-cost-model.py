@@ -32,7 +32,7 @@ TERMS = [
     ("NS_PER_GUIDED_DENSITY_LOOKUP", "guided_density_lookups_per_path"),
     ("NS_PER_FIELD_LOOKUP", "field_lookups_per_path"),
     ("NS_PER_PRODUCT", "products_per_path"),
-    ("NS_PER_REWEIGHTED_PRODUCT", "reweighted_products_per_path"),
+    ("NS_PER_LOBE_PRODUCT", "lobe_products_per_path"),
     ("NS_PER_EXTRA_COLLISION", "extra_collisions_per_path"),
 ]
 

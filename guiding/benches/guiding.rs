@@ -113,6 +113,13 @@ fn bench(c: &mut Criterion) {
             d.apply_hg_weights(black_box(dirs[i]), 0.6);
         })
     });
+    g.bench_function("init_and_hg_lobe_product", |b| {
+        b.iter(|| {
+            i = (i + 1) & 1023;
+            d.init(&field, black_box(positions[i]), 0.5);
+            d.apply_hg_lobe_product(black_box(dirs[i]), 0.6);
+        })
+    });
     g.bench_function("init_and_cosine_weights", |b| {
         b.iter(|| {
             i = (i + 1) & 1023;
@@ -149,6 +156,19 @@ fn bench(c: &mut Criterion) {
         })
     });
     g.bench_function("weights_pdf", |b| {
+        b.iter(|| {
+            i = (i + 1) & 1023;
+            black_box(d.pdf(black_box(dirs[i])))
+        })
+    });
+    d.apply_hg_lobe_product(Vec3::X, 0.6);
+    g.bench_function("lobe_product_sample_with_pdf", |b| {
+        b.iter(|| {
+            i = (i + 1) & 1023;
+            black_box(d.sample_with_pdf(black_box(us[i])))
+        })
+    });
+    g.bench_function("lobe_product_pdf", |b| {
         b.iter(|| {
             i = (i + 1) & 1023;
             black_box(d.pdf(black_box(dirs[i])))

@@ -10,6 +10,7 @@ use crate::directional::hg::{self, HG_LOBES};
 use crate::directional::lanes::{self, LANES};
 use crate::directional::mixture::MAX_LOBES;
 use crate::directional::product::{COSINE_KAPPA, LobeSet, RegionLanes};
+use crate::directional::vmf;
 use crate::field::Field;
 use glam::{Vec2, Vec3};
 
@@ -26,6 +27,9 @@ pub enum ProductKind {
     /// Incident radiance with its lobes reweighted by their convolution with the
     /// Henyey-Greenstein phase function (`apply_hg_weights`).
     HenyeyGreensteinWeights,
+    /// Incident radiance times one vMF lobe of the Henyey-Greenstein phase function's mean
+    /// cosine (`apply_hg_lobe_product`).
+    HenyeyGreensteinLobe,
     /// Incident radiance times a clamped cosine.
     Cosine,
     /// Incident radiance with its lobes reweighted by their mean clamped cosine
@@ -59,6 +63,10 @@ pub struct VolumeDistribution {
     kind: ProductKind,
     fluence: f32,
     region: Option<u32>,
+    /// The last `|g|` of [`apply_hg_lobe_product`](Self::apply_hg_lobe_product) and its
+    /// lobe's concentration: a scene has few phase functions, and inverting the mean cosine
+    /// takes a few Newton steps.
+    hg_lobe: (f32, f32),
 }
 
 impl Default for VolumeDistribution {
@@ -70,6 +78,7 @@ impl Default for VolumeDistribution {
             kind: ProductKind::None,
             fluence: 0.0,
             region: None,
+            hg_lobe: (0.0, 0.0),
         }
     }
 }
@@ -124,6 +133,31 @@ impl VolumeDistribution {
         let factor: [(f32, f32); HG_LOBES] = std::array::from_fn(|i| (fit.kappa[i], fit.weight[i]));
         self.kind = if self.product.set_product(&self.base, ray_dir * fit.axis_sign, &factor) {
             ProductKind::HenyeyGreenstein
+        } else {
+            ProductKind::Fallback
+        };
+    }
+
+    /// Replaces the distribution by the normalised product of the incident-radiance mixture
+    /// with one vMF lobe standing in for the Henyey-Greenstein phase function: the lobe whose
+    /// mean cosine is `|g|`, about `ray_dir` (about `-ray_dir` for `g < 0`). It makes one
+    /// product lobe per mixture lobe where [`apply_hg_product`] makes [`HG_LOBES`], so it costs
+    /// about what [`apply_hg_weights`] costs; unlike the reweighted lobes it keeps the phase
+    /// function's forward peak inside each broad lobe (light from all around a vertex), which
+    /// is where most of the product is at moderate `g`. HG's heavy tail beyond the lobe is left
+    /// to the phase-function sampling the walk mixes in.
+    ///
+    /// [`apply_hg_product`]: Self::apply_hg_product
+    /// [`apply_hg_weights`]: Self::apply_hg_weights
+    pub fn apply_hg_lobe_product(&mut self, ray_dir: Vec3, g: f32) {
+        let g_abs = g.abs().min(hg::G_MAX);
+        if self.hg_lobe.0 != g_abs {
+            self.hg_lobe = (g_abs, vmf::kappa_from_mean_cosine(g_abs));
+        }
+        let kappa = self.hg_lobe.1;
+        let axis = if g < 0.0 { -ray_dir } else { ray_dir };
+        self.kind = if self.product.set_product(&self.base, axis, &[(kappa, 1.0)]) {
+            ProductKind::HenyeyGreensteinLobe
         } else {
             ProductKind::Fallback
         };
@@ -325,6 +359,20 @@ mod tests {
                 d.apply_hg_product(RAY, g);
                 assert_eq!(d.product_kind(), ProductKind::HenyeyGreenstein);
                 let what = format!("kappa {kappa} g {g}");
+                assert_normalised_and_sampled(&d, &mut rng, 30_000, 2e-4, &what);
+            }
+        }
+    }
+
+    #[test]
+    fn hg_lobe_product_is_normalised_and_sampling_matches_pdf() {
+        let mut rng = Pcg32::new(27, 5);
+        for &kappa in &[0.0f32, 1.0, 100.0, 1e4] {
+            for &g in &GS {
+                let mut d = with_mixture(&radiance_mixture(kappa), 1.0);
+                d.apply_hg_lobe_product(RAY, g);
+                assert_eq!(d.product_kind(), ProductKind::HenyeyGreensteinLobe);
+                let what = format!("one lobe: kappa {kappa} g {g}");
                 assert_normalised_and_sampled(&d, &mut rng, 30_000, 2e-4, &what);
             }
         }

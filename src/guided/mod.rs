@@ -157,10 +157,11 @@ pub struct Estimates {
 /// function; below it HG is within 15% of isotropic and the incident radiance alone is used.
 pub const PRODUCT_MIN_G: f32 = 0.05;
 /// Smallest `|g|` for which the product is the exact one (every mixture lobe times each of
-/// the four lobes of HG's fit); below it the mixture's lobes are only reweighted by their
-/// convolution with HG (`VolumeDistribution::apply_hg_weights`), at about a third of the cost.
-/// At moderate `g` that loses little against the exact product and far beats none; strongly
-/// forward scattering needs the reshaped lobes (see docs/experiments.md).
+/// the four lobes of HG's fit); below it HG is stood in for by one vMF lobe of its mean
+/// cosine (`VolumeDistribution::apply_hg_lobe_product`), one product lobe per mixture lobe.
+/// At moderate `g` that lobe is close to HG, and the product keeps HG's forward peak inside
+/// broad radiance lobes; strongly forward scattering needs HG's sharp peak and heavy tail
+/// (see docs/experiments.md).
 pub const EXACT_PRODUCT_MIN_G: f32 = 0.7;
 
 /// A trained guiding field as a radiance cache, with its per-thread query state.
@@ -226,7 +227,7 @@ pub struct DirectRecord {
 /// (its length the fluence-weighted mean resultant length, at most 1): HG with `g`
 /// times that length about the axis, which is exact for light from one direction (the sun, a
 /// small light) and isotropic for light from everywhere, the moment-matched answer between
-/// (as `VolumeDistribution::apply_hg_weights` treats a lobe).
+/// (as `VolumeDistribution::apply_hg_weights` in the guiding crate treats a lobe).
 #[inline]
 fn inscattered_about(fluence: f32, axis: Vec3A, w: Vec3A, g: f32) -> f32 {
     if fluence <= 0.0 {
@@ -345,7 +346,7 @@ impl RadianceCache for FieldCache<'_> {
         if g_abs < PRODUCT_MIN_G {
             self.dist.clear_product();
         } else if g_abs < EXACT_PRODUCT_MIN_G {
-            self.dist.apply_hg_weights(ray_dir.into(), g);
+            self.dist.apply_hg_lobe_product(ray_dir.into(), g);
         } else {
             self.dist.apply_hg_product(ray_dir.into(), g);
         }

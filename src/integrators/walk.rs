@@ -524,7 +524,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
         if product && g.abs() >= EXACT_PRODUCT_MIN_G {
             self.counters.products += 1;
         } else if product && g.abs() >= PRODUCT_MIN_G {
-            self.counters.reweighted_products += 1;
+            self.counters.lobe_products += 1;
         }
         let mix = Mixture::at(settings, alpha, product, scene, p);
         let cache = &*self.ctx.cache;

@@ -46,8 +46,8 @@ pub struct RenderStats {
     pub field_lookups_per_path: f64,
     /// Exact products of a region's mixture with the phase function per path.
     pub products_per_path: f64,
-    /// Reweighted (approximate) products with the phase function per path.
-    pub reweighted_products_per_path: f64,
+    /// Products with one vMF lobe standing in for the phase function per path.
+    pub lobe_products_per_path: f64,
     /// Extra collisions for delta lights per path.
     pub extra_collisions_per_path: f64,
 }
@@ -98,7 +98,7 @@ impl RenderStats {
             guided_density_lookups_per_path: per_path(c.guided_density_lookups),
             field_lookups_per_path: per_path(c.field_lookups),
             products_per_path: per_path(c.products),
-            reweighted_products_per_path: per_path(c.reweighted_products),
+            lobe_products_per_path: per_path(c.lobe_products),
             extra_collisions_per_path: per_path(c.extra_collisions),
         }
     }
