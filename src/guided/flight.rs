@@ -286,7 +286,7 @@ mod tests {
         let expected = 1.0 / (1.0 - (-2.0f32).exp()) - 1.0;
         assert!((front.own_variance - expected).abs() < 1e-3 * expected, "{}", front.own_variance);
         assert_eq!(equiangular_share(&front, false), None);
-        // A shaft from optical depth 2 to 3: 8.6% of collisions, relative variance 10.6.
+        // A shaft from optical depth 2 to 3: 8.6% of collisions, relative variance 10.7.
         let shaft = stretch(sigma, 4.0 * part, 6.0 * part);
         let mass = (-2.0f32).exp() - (-3.0f32).exp();
         let expected = 1.0 / mass - 1.0;
