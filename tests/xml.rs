@@ -1432,3 +1432,54 @@ fn every_mitsuba_sampler_renders_its_rounded_sample_count() {
     let e = xml("sampler.xml", &text.replace("orthogonal", "sobol"), &[]).unwrap_err();
     assert!(e.to_string().contains("`sobol` sampler is not supported"), "{e}");
 }
+
+/// A homogeneous medium as Mitsuba takes it: its albedo may be a constant volume (the same
+/// image as the colour), `has_spectral_extinction` is a sampling hint, refused only where it
+/// would make Mitsuba's own image wrong (false over a chromatic extinction), and an albedo grid
+/// says what to use instead.
+#[test]
+fn homogeneous_media_take_mitsubas_albedo_volumes_and_extinction_hint() {
+    let scene = |medium: &str| {
+        format!(
+            r#"<scene version="3.0.0">
+            <integrator type="volpath"/>
+            <sensor type="perspective">
+                <float name="fov" value="40"/>
+                <transform name="to_world"><lookat origin="0, 0, 5" target="0, 0, 0" up="0, 1, 0"/></transform>
+                <film type="hdrfilm"><integer name="width" value="8"/><integer name="height" value="6"/></film>
+            </sensor>
+            <emitter type="constant"><rgb name="radiance" value="1"/></emitter>
+            <shape type="sphere">
+                <bsdf type="null"/>
+                <medium type="homogeneous" name="interior">{medium}</medium>
+            </shape>
+        </scene>"#
+        )
+    };
+    let colour =
+        xml("albedo-colour.xml", &scene(r#"<rgb name="albedo" value="0.2, 0.5, 0.9"/>"#), &[])
+            .unwrap_or_else(|e| panic!("{e}"));
+    let volume = xml(
+        "albedo-volume.xml",
+        &scene(
+            r#"<volume name="albedo" type="constvolume"><rgb name="value" value="0.2, 0.5, 0.9"/></volume>
+               <boolean name="has_spectral_extinction" value="false"/>"#,
+        ),
+        &[],
+    )
+    .unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(image(&colour, 3), image(&volume, 3));
+    // The default albedo (Mitsuba's 0.75) differs, so the comparison above can fail.
+    let default = xml("albedo-default.xml", &scene(""), &[]).unwrap();
+    assert_ne!(image(&colour, 3), image(&default, 3));
+
+    let hint = r#"<rgb name="sigma_t" value="1, 2, 3"/><boolean name="has_spectral_extinction" value="false"/>"#;
+    let err = xml("hint.xml", &scene(hint), &[]).expect_err("refused").to_string();
+    assert!(err.contains("hint.xml:") && err.contains("has_spectral_extinction"), "{err}");
+    let hint = r#"<rgb name="sigma_t" value="1, 2, 3"/><boolean name="has_spectral_extinction" value="true"/>"#;
+    xml("hint-true.xml", &scene(hint), &[]).unwrap_or_else(|e| panic!("{e}"));
+
+    let grid = r#"<volume name="albedo" type="gridvolume"><string name="filename" value="a.vol"/></volume>"#;
+    let err = xml("grid-albedo.xml", &scene(grid), &[]).expect_err("refused").to_string();
+    assert!(err.contains("grid-albedo.xml:") && err.contains("heterogeneous"), "{err}");
+}

@@ -60,7 +60,24 @@ impl Conv {
         match o.kind.as_str() {
             "homogeneous" => {
                 d.kind = "homogeneous".into();
-                let (t, a) = (p.color("sigma_t")?, p.color("albedo")?);
+                // Mitsuba allows a spatially varying albedo here; a constant volume is a colour.
+                if let Some(prop) = p.raw("albedo")
+                    && matches!(&prop.value, Value::Object(o) if o.kind == "gridvolume")
+                {
+                    return Err(p.wrong(
+                        prop,
+                        "a colour or a constvolume in a homogeneous medium (for an albedo grid, \
+                         use a heterogeneous medium)",
+                    ));
+                }
+                let a = match self.volume(&p, "albedo")? {
+                    None => None,
+                    Some(Volume::Constant(c, _)) => Some(c),
+                    Some(Volume::Grid(..)) => {
+                        return Err(p.err("an albedo grid needs a heterogeneous medium"));
+                    }
+                };
+                let t = p.color("sigma_t")?;
                 match (t, a, p.color("sigma_a")?, p.color("sigma_s")?) {
                     (t, a, None, None) => {
                         d.sigma_t = t;
@@ -119,6 +136,16 @@ impl Conv {
         d.phase = p.object("phase")?.map(phase).transpose()?;
         // Sampling choices that leave the expected image alone: zerovar makes its own.
         p.boolean("sample_emitters")?;
+        // Mitsuba's promise that the extinction is grey, which lets it skip spectral MIS; a
+        // chromatic extinction under it renders wrongly there, so that is refused.
+        if p.boolean("has_spectral_extinction")? == Some(false)
+            && matches!(d.sigma_t, Some(Rgb::Rgb([r, g, b])) if r != g || g != b)
+        {
+            return Err(p.err(
+                "has_spectral_extinction is false but sigma_t differs between channels; remove \
+                 it or set it to true",
+            ));
+        }
         if d.kind == "grid" {
             p.integer("majorant_resolution_factor")?;
             p.float("majorant_factor")?;
