@@ -269,6 +269,68 @@ const REFS: &str = r#"<scene version="3.0.0">
 </scene>
 "#;
 
+/// As in Mitsuba, a `<ref>` may name an object defined later in the file (a sensor that
+/// names the medium it sits in, written before it): the same scene as with the objects in
+/// order, a medium referenced twice still one medium; a cycle, an unknown id and an endless
+/// chain of references are errors that say where.
+#[test]
+fn references_may_come_before_their_objects() {
+    let medium = r#"<medium type="homogeneous" id="haze">
+        <rgb name="sigma_a" value="0.1, 0.2, 0.3"/>
+        <rgb name="sigma_s" value="0.3"/>
+    </medium>"#;
+    let glass = r#"<bsdf type="dielectric" id="glass"><float name="int_ior" value="1.33"/></bsdf>"#;
+    let ordered = REFS.replace(medium, "").replace(glass, "");
+    assert_ne!(ordered, REFS);
+    let late = ordered.replace("</scene>", &format!("{medium}{glass}</scene>"));
+    let b = xml("forward.xml", &late, &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(b.media().len(), 1, "a medium referenced three times is one medium");
+    assert_eq!(b.camera_medium(), Some(0));
+    assert!(b.surfaces().iter().all(|f| f.exterior == Some(0) && f.interior.is_none()));
+    // The same image, on a small film under a point light (a glass bsdf defined last is still glass).
+    let small = |s: &str| {
+        let film = r#"<film type="hdrfilm"><integer name="width" value="24"/><integer name="height" value="18"/></film>"#;
+        s.replace(
+            "</scene>",
+            r#"<emitter type="point"><point name="position" x="1" y="2" z="3"/></emitter></scene>"#,
+        )
+        .replace(
+            r#"<float name="fov" value="40"/>"#,
+            &format!(r#"<float name="fov" value="40"/>{film}"#),
+        )
+    };
+    assert_ne!(small(REFS), REFS);
+    let (a, b) = (
+        xml("in-order.xml", &small(REFS), &[]).unwrap(),
+        xml("forward.xml", &small(&late), &[]).unwrap(),
+    );
+    let sum = |s: &Scene| image(s, 1).iter().map(|p| p[0] + p[1] + p[2]).sum::<f32>();
+    assert!(sum(&a) > 0.0);
+    assert_eq!(image(&a, 1), image(&b, 1));
+    let diffuse = small(&late).replace(glass, r#"<bsdf type="diffuse" id="glass"/>"#);
+    assert_ne!(sum(&a), sum(&xml("diffuse.xml", &diffuse, &[]).unwrap()));
+
+    // A bsdf that holds itself through a later reference.
+    let cycle = late.replace(glass, r#"<bsdf type="twosided" id="glass"><ref id="glass"/></bsdf>"#);
+    let err = xml("cycle.xml", &cycle, &[]).expect_err("a cycle").to_string();
+    assert!(err.contains("cycle.xml:") && err.contains("refers to itself"), "{err}");
+    let unknown = late.replace("<ref id=\"haze\"/>", "<ref id=\"fog\"/>");
+    let err = xml("unknown.xml", &unknown, &[]).expect_err("no such id").to_string();
+    assert!(err.contains("unknown.xml:") && err.contains("id=\"fog\""), "{err}");
+    // Each texture of a long chain names the next, defined after it.
+    let chain: String = (0..200)
+        .map(|i| {
+            format!(
+                r#"<texture type="checkerboard" id="t{i}"><ref name="color0" id="t{}"/></texture>"#,
+                i + 1
+            )
+        })
+        .collect();
+    let deep = late.replace("</scene>", &format!("{chain}</scene>"));
+    let err = xml("deep.xml", &deep, &[]).expect_err("too deep").to_string();
+    assert!(err.contains("deep.xml:") && err.contains("nested more than"), "{err}");
+}
+
 #[test]
 fn defaults_overrides_and_refs() {
     let s = xml("refs.xml", REFS, &[]).unwrap();
@@ -399,7 +461,7 @@ fn bad_input_names_the_place_and_the_fix() {
             radius,
             "<ref id=\"glass\"/>",
             "ref.xml:6:9",
-            &["<ref id=\"glass\"> names no object defined before it"],
+            &["<ref id=\"glass\"> names no object; define an object with id=\"glass\""],
         ),
         (
             "blend",

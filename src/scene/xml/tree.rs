@@ -36,7 +36,7 @@ impl Pos {
 }
 
 /// A property's value.
-#[derive(Debug)]
+#[derive(Clone, Debug)]
 pub(super) enum Value {
     Float(f64),
     Integer(i64),
@@ -132,14 +132,97 @@ pub(super) fn read(
         nesting: 0,
         includes: 0,
         ids: HashMap::new(),
+        forward_refs: false,
         sources,
         stack: Vec::new(),
         root_dir: path.parent().unwrap_or(Path::new("")).to_path_buf(),
         search: Vec::new(),
     };
     let (pos, props) = reader.file(path, source, true)?;
+    let props = if reader.forward_refs {
+        let mut linker = Linker { ids: &reader.ids, done: HashMap::new(), open: Vec::new() };
+        linker.props(&props)?
+    } else {
+        props
+    };
     let scene = Object { tag: "scene".into(), kind: "scene".into(), id: None, pos, props };
     Ok((scene, reader.search))
+}
+
+/// The tag of the stand-in a `<ref>` to an object not read yet becomes, its `kind` the id:
+/// Mitsuba resolves references once the whole file is read, so a sensor may name a medium
+/// defined after it.
+const FORWARD_REF: &str = "ref";
+
+/// Replaces forward references by their objects once every object is read. An object with an
+/// id is linked once and shared wherever it is referenced (a medium referenced twice stays one
+/// medium); a reference cycle is an error.
+struct Linker<'a> {
+    ids: &'a HashMap<String, Rc<Object>>,
+    done: HashMap<String, Rc<Object>>,
+    /// Ids being linked, outermost first.
+    open: Vec<String>,
+}
+
+impl Linker<'_> {
+    fn props(&mut self, props: &[Prop]) -> Result<Vec<Prop>> {
+        props
+            .iter()
+            .map(|p| {
+                let value = match &p.value {
+                    Value::Object(o) => Value::Object(self.object(o)?),
+                    other => other.clone(),
+                };
+                Ok(Prop { name: p.name.clone(), value, pos: p.pos.clone() })
+            })
+            .collect()
+    }
+
+    fn object(&mut self, o: &Rc<Object>) -> Result<Rc<Object>> {
+        if o.tag == FORWARD_REF {
+            let id = &o.kind;
+            let Some(target) = self.ids.get(id) else {
+                return Err(o.pos.err(format!(
+                    "<ref id=\"{id}\"> names no object; define an object with id=\"{id}\" \
+                     in the scene"
+                )));
+            };
+            return self.object(&target.clone());
+        }
+        let Some(id) = &o.id else { return self.rebuilt(o) };
+        if let Some(done) = self.done.get(id) {
+            return Ok(done.clone());
+        }
+        if self.open.contains(id) {
+            return Err(o.pos.err(format!(
+                "{} refers to itself through <ref id=\"{id}\">; an object cannot contain itself",
+                o.describe()
+            )));
+        }
+        // Each link in a chain of references nests the linker once more: a hostile file's
+        // chain must not overflow the stack.
+        if self.open.len() >= MAX_NESTING {
+            return Err(o.pos.err(format!(
+                "references nested more than {MAX_NESTING} deep; no scene needs that"
+            )));
+        }
+        self.open.push(id.clone());
+        let linked = self.rebuilt(o);
+        self.open.pop();
+        let linked = linked?;
+        self.done.insert(id.clone(), linked.clone());
+        Ok(linked)
+    }
+
+    fn rebuilt(&mut self, o: &Object) -> Result<Rc<Object>> {
+        Ok(Rc::new(Object {
+            tag: o.tag.clone(),
+            kind: o.kind.clone(),
+            id: o.id.clone(),
+            pos: o.pos.clone(),
+            props: self.props(&o.props)?,
+        }))
+    }
 }
 
 /// Deepest nesting of elements read: far beyond any real scene, and shallow enough that a
@@ -156,6 +239,8 @@ struct Reader<'s> {
     nesting: usize,
     includes: usize,
     ids: HashMap<String, Rc<Object>>,
+    /// Whether some `<ref>` named an object not read yet (see [`FORWARD_REF`]).
+    forward_refs: bool,
     sources: &'s mut Sources,
     /// Files being read, outermost first, to detect cyclic includes.
     stack: Vec<PathBuf>,
@@ -339,18 +424,20 @@ impl Reader<'_> {
         Ok(())
     }
 
-    /// `<ref id [name]>`: an object defined earlier.
+    /// `<ref id [name]>`: an object defined earlier, or a stand-in for one defined later.
     fn reference(&mut self, child: Node<'_, '_>, pos: Pos) -> Result<Prop> {
         self.attributes(child, &pos, &["id", "name"])?;
         let id = self.required(child, &pos, "id")?;
-        let Some(object) = self.ids.get(&id) else {
-            return Err(pos.err(format!(
-                "<ref id=\"{id}\"> names no object defined before it; define an \
-                 object with id=\"{id}\" earlier in the file"
-            )));
+        let object = match self.ids.get(&id) {
+            Some(object) => object.clone(),
+            None => {
+                self.forward_refs = true;
+                let tag = FORWARD_REF.to_string();
+                Rc::new(Object { tag, kind: id, id: None, pos: pos.clone(), props: Vec::new() })
+            }
         };
-        let value = Value::Object(object.clone());
-        Ok(Prop { name: self.attr(child, &pos, "name")?.unwrap_or_default(), value, pos })
+        let name = self.attr(child, &pos, "name")?.unwrap_or_default();
+        Ok(Prop { name, value: Value::Object(object), pos })
     }
 
     /// An object element (`<shape>`, `<bsdf>`, ...) with its properties, remembered by its id.
