@@ -369,3 +369,12 @@ fn mitsuba_v_blended_phase_function() {
 fn mitsuba_y_cylinders() {
     validate("y-cylinder", 16384);
 }
+
+/// A directional light seen from inside a fog that no shape bounds: Mitsuba places the light at
+/// twice the scene's bounding radius, so it comes through that much fog (an infinite distance
+/// would leave the image black but for nothing). The scene names its medium in the sensor
+/// before defining it.
+#[test]
+fn mitsuba_z_sun_in_unbounded_fog() {
+    validate("z-sun-unbounded-fog", 4096);
+}

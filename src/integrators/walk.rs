@@ -1090,12 +1090,14 @@ fn sample_light(
     // towards the light, and along `wi` the light's own surface would then lie closer than
     // `distance`, by offset / cos at the light, and block the ray (far from a light, where the
     // offset grows with the coordinates, and at grazing angles on the light).
-    let (dir, reach) = if matches!(light, Light::Area { .. }) {
-        let to = p + ls.wi * ls.distance - origin;
-        let length = to.length();
-        (to / length, length * (1.0 - 1e-4))
-    } else {
-        (ls.wi, ls.distance)
+    let (dir, reach) = match light {
+        Light::Area { .. } => {
+            let to = p + ls.wi * ls.distance - origin;
+            let length = to.length();
+            (to / length, length * (1.0 - 1e-4))
+        }
+        Light::Directional { .. } if ls.delta => (ls.wi, scene.sun_reach(p)),
+        _ => (ls.wi, ls.distance),
     };
     let tr = shadow_transmittance(scene, Ray::new(origin, dir), reach, medium, sampler, counters);
     if tr.max_element() <= 0.0 {

@@ -314,6 +314,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
     let point_lights = lights.iter().filter_map(Light::point_light).collect();
     let trackers = media.iter().map(Tracker::for_medium).collect();
     let bvh = Bvh::build(&shapes);
+    let world = bounding_sphere(&bvh, &media);
     Ok(Scene {
         path: path.to_path_buf(),
         shapes,
@@ -329,7 +330,22 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
         camera_medium,
         global_medium,
         settings,
+        world,
     })
+}
+
+/// The sphere around the shapes (Mitsuba's scene bounds) and the boxes of bounded media: where
+/// a directional light is placed (see [`Scene::sun_reach`]).
+fn bounding_sphere(bvh: &Bvh, media: &[Medium]) -> (glam::Vec3A, f32) {
+    let boxes = media.iter().filter_map(|m| match &m.kind {
+        MediumKind::Heterogeneous(h) => Some(h.bounds()),
+        MediumKind::Homogeneous { .. } => None,
+    });
+    let b = boxes.fold(bvh.bounds(), |a, b| a.union(&b));
+    if b.is_empty() || !(b.min.is_finite() && b.max.is_finite()) {
+        return (glam::Vec3A::ZERO, 0.0);
+    }
+    (b.center(), 0.5 * (b.max - b.min).length())
 }
 
 fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {

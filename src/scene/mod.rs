@@ -224,6 +224,8 @@ pub struct Scene {
     pub(crate) global_medium: Option<u32>,
     /// Integrator settings.
     pub(crate) settings: RenderSettings,
+    /// The centre and radius of the sphere around the shapes and bounded media.
+    pub(crate) world: (glam::Vec3A, f32),
 }
 
 /// Loads, validates and compiles a scene file: TOML, or a Mitsuba 3 scene if the name ends in
@@ -254,6 +256,16 @@ pub fn load_str(
 }
 
 impl Scene {
+    /// How far from `p` a directional light's shadow ray reaches: twice the larger of the
+    /// scene's bounding radius and `p`'s distance from its centre, where Mitsuba places such a
+    /// light. Every shape and bounded medium lies within it, so only a medium without bounds
+    /// sees a difference from an infinite distance: the light comes through that much of it,
+    /// as in Mitsuba, where an infinite one would let none through.
+    pub fn sun_reach(&self, p: glam::Vec3A) -> f32 {
+        let (centre, radius) = self.world;
+        2.0 * radius.max((p - centre).length()).max(1e-5)
+    }
+
     /// The file the scene came from (empty for a scene built in code).
     pub fn path(&self) -> &Path {
         &self.path
