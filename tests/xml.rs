@@ -1213,6 +1213,7 @@ fn bitmap_textures_and_their_errors() {
     let png = std::fs::read(repo("tests/data/mitsuba/tex-5x3.png")).unwrap();
     write("tex.png", &png);
     write("tex.jpg", &png);
+    write("tex.gif", &png);
     let bright = temp_dir().join("bright.exr");
     let meta =
         zerovar::output::ImageMetadata { spp: 1, seconds: 0.0, seed: 0, scene: String::new() };
@@ -1232,7 +1233,11 @@ fn bitmap_textures_and_their_errors() {
     assert_eq!(t.eval(Vec2::new(0.1, 1.0 / 6.0)).to_array(), [1.0, 0.0, 0.0]);
     assert_eq!(t.eval(Vec2::new(0.9, 5.0 / 6.0)).to_array(), [0.0, 0.0, 1.0]);
     for (texture, needle) in [
-        ("<string name=\"filename\" value=\"tex.jpg\"/>", "zerovar reads PNG and OpenEXR textures"),
+        ("<string name=\"filename\" value=\"tex.jpg\"/>", "tex.jpg: cannot read JPEG"),
+        (
+            "<string name=\"filename\" value=\"tex.gif\"/>",
+            "reads OpenEXR, Radiance HDR (.hdr), PNG and JPEG",
+        ),
         ("<string name=\"filename\" value=\"missing.png\"/>", "missing.png not found"),
         ("<string name=\"filename\" value=\"bright.exr\"/>", "texel values reach 1.5"),
         (
@@ -1544,4 +1549,50 @@ fn homogeneous_media_take_mitsubas_albedo_volumes_and_extinction_hint() {
     let grid = r#"<volume name="albedo" type="gridvolume"><string name="filename" value="a.vol"/></volume>"#;
     let err = xml("grid-albedo.xml", &scene(grid), &[]).expect_err("refused").to_string();
     assert!(err.contains("grid-albedo.xml:") && err.contains("heterogeneous"), "{err}");
+}
+
+/// Images as Mitsuba's bitmaps read them beyond PNG and OpenEXR: a JPEG texture decoded from
+/// sRGB (unless `raw`), and a Radiance HDR environment map as stored (linear).
+#[test]
+fn jpeg_textures_and_radiance_hdr_environment_maps() {
+    let grey = image::RgbImage::from_pixel(8, 8, image::Rgb([128, 128, 128]));
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 100).encode_image(&grey).unwrap();
+    write("grey.jpg", &jpeg);
+    for (raw, want) in
+        [("false", ((128.0f32 / 255.0 + 0.055) / 1.055).powf(2.4)), ("true", 128.0 / 255.0)]
+    {
+        let text = sphere_with(&format!(
+            "<bsdf type=\"diffuse\"><texture type=\"bitmap\" name=\"reflectance\">\
+             <string name=\"filename\" value=\"grey.jpg\"/><boolean name=\"raw\" value=\"{raw}\"/>\
+             </texture></bsdf>"
+        ));
+        let s = xml("jpeg.xml", &text, &[]).unwrap_or_else(|e| panic!("{e}"));
+        let zerovar::bsdf::Bsdf::Diffuse { reflectance, .. } = &s.surfaces()[0].bsdf else {
+            panic!("{:?}", s.surfaces()[0].bsdf)
+        };
+        let v = reflectance.eval(Vec2::new(0.5, 0.5)).to_array();
+        assert!(v.iter().all(|c| (c - want).abs() < 0.01), "raw {raw}: {v:?} against {want}");
+    }
+
+    // A sky of 1.5 in its upper half and 0.25 in its lower one, as Radiance HDR (both exact
+    // in its 8-bit mantissas).
+    let pixels: Vec<image::Rgb<f32>> =
+        (0..8 * 16).map(|i| image::Rgb([if i < 4 * 16 { 1.5 } else { 0.25 }; 3])).collect();
+    let mut hdr = Vec::new();
+    image::codecs::hdr::HdrEncoder::new(&mut hdr).encode(&pixels, 16, 8).unwrap();
+    write("sky.hdr", &hdr);
+    let env = |file: &str| {
+        format!(
+            r#"<scene version="3.0.0"><integrator type="volpath"/>
+            <sensor type="perspective"><float name="fov" value="40"/></sensor>
+            <emitter type="envmap"><string name="filename" value="{file}"/></emitter></scene>"#
+        )
+    };
+    let s = xml("hdr-sky.xml", &env("sky.hdr"), &[]).unwrap_or_else(|e| panic!("{e}"));
+    let up = s.lights()[0].eval_escaped(Vec3A::Y).0.to_array();
+    let down = s.lights()[0].eval_escaped(-Vec3A::Y).0.to_array();
+    assert_eq!((up, down), ([1.5; 3], [0.25; 3]));
+    let e = xml("gif-sky.xml", &env("tex.gif"), &[]).unwrap_err().to_string();
+    assert!(e.contains("gif-sky.xml:") && e.contains("Radiance HDR (.hdr)"), "{e}");
 }

@@ -645,35 +645,51 @@ fn relative_ior(cx: &Ctx<'_>, d: &BsdfDesc, int: f32) -> Result<f32> {
     Ok(int / ext)
 }
 
-/// Mitsuba's bitmap texture from its image file: PNG (8 or 16 bits, sRGB-decoded unless
-/// `raw`) or OpenEXR (linear), of reflectances in [0, 1].
-fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc) -> Result<Texture> {
-    let file = cx.file(&d.filename);
-    crate::files::check(&file).or_else(|e| cx.err(format!("{}: {e}", file.display())))?;
+/// An image file's pixels as linear RGB, as Mitsuba's bitmaps read them: OpenEXR and Radiance
+/// HDR as stored, PNG (8 or 16 bits) and JPEG decoded from sRGB unless `raw`.
+fn read_picture(
+    file: &Path,
+    raw: bool,
+) -> std::result::Result<(usize, usize, Vec<[f32; 3]>), String> {
     let is = |ext: &str| file.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext));
-    let (width, height, texels) = if is("exr") {
-        crate::output::read_exr(&file).or_else(|e| cx.err(e.to_string()))?
-    } else if is("png") {
-        let cannot = |e: image::ImageError| format!("{}: cannot read PNG: {e}", file.display());
-        let (w, h) = image::image_dimensions(&file).or_else(|e| cx.err(cannot(e)))?;
-        let pixels = u64::from(w) * u64::from(h);
-        if pixels > crate::output::MAX_EXR_PIXELS as u64 {
-            return cx.err(format!(
-                "{}: {w} x {h} texels, more than the {} zerovar reads",
-                file.display(),
-                crate::output::MAX_EXR_PIXELS
-            ));
-        }
-        let image = image::open(&file).or_else(|e| cx.err(cannot(e)))?.into_rgb32f();
-        let decode = |v: f32| if d.raw.unwrap_or(false) { v } else { srgb_to_linear(v) };
-        let texels = image.pixels().map(|p| p.0.map(decode)).collect();
-        (w as usize, h as usize, texels)
+    if is("exr") {
+        return crate::output::read_exr(file).map_err(|e| e.to_string());
+    }
+    let (kind, linear) = if is("png") {
+        ("PNG", false)
+    } else if is("jpg") || is("jpeg") {
+        ("JPEG", false)
+    } else if is("hdr") || is("rgbe") {
+        ("Radiance HDR", true)
     } else {
-        return cx.err(format!(
-            "{}: zerovar reads PNG and OpenEXR textures; convert the image to one of them",
+        return Err(format!(
+            "{}: zerovar reads OpenEXR, Radiance HDR (.hdr), PNG and JPEG images; convert the \
+             image to one of them",
             file.display()
         ));
     };
+    let cannot = |e: image::ImageError| format!("{}: cannot read {kind}: {e}", file.display());
+    // The header's size first, so a corrupt one cannot exhaust memory.
+    let (w, h) = image::image_dimensions(file).map_err(cannot)?;
+    if u64::from(w) * u64::from(h) > crate::output::MAX_EXR_PIXELS as u64 {
+        return Err(format!(
+            "{}: {w} x {h} pixels, more than the {} zerovar reads",
+            file.display(),
+            crate::output::MAX_EXR_PIXELS
+        ));
+    }
+    let image = image::open(file).map_err(cannot)?.into_rgb32f();
+    let decode = |v: f32| if linear || raw { v } else { srgb_to_linear(v) };
+    Ok((w as usize, h as usize, image.pixels().map(|p| p.0.map(decode)).collect()))
+}
+
+/// Mitsuba's bitmap texture from its image file (see [`read_picture`]), of reflectances in
+/// [0, 1].
+fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc) -> Result<Texture> {
+    let file = cx.file(&d.filename);
+    crate::files::check(&file).or_else(|e| cx.err(format!("{}: {e}", file.display())))?;
+    let (width, height, texels) =
+        read_picture(&file, d.raw.unwrap_or(false)).or_else(|e| cx.err(e))?;
     let bilinear = match d.filter_type.as_deref() {
         None | Some("bilinear") => true,
         Some("nearest") => false,
@@ -1075,8 +1091,7 @@ fn light(cx: &Ctx<'_>, d: &LightDesc) -> Result<Light> {
                 return cx.err(format!("scale {scale} must be finite and non-negative"));
             }
             let to_world = cx.transform(&d.transform)?;
-            let (w, h, pixels) =
-                crate::output::read_exr(&file).or_else(|e| cx.err(e.to_string()))?;
+            let (w, h, pixels) = read_picture(&file, false).or_else(|e| cx.err(e))?;
             let pixels: Vec<Spectrum> = pixels.into_iter().map(Spectrum::from_array).collect();
             if let Some(i) = pixels.iter().position(|p| !p.is_finite() || p.min_element() < 0.0) {
                 return cx.err(format!(
