@@ -378,3 +378,17 @@ fn mitsuba_y_cylinders() {
 fn mitsuba_z_sun_in_unbounded_fog() {
     validate("z-sun-unbounded-fog", 4096);
 }
+
+/// A camera whose `to_world` mirrors, which Mitsuba allows: the image flipped left to right
+/// (the scene is lit from one side, so an unmirrored image disagrees).
+#[test]
+fn mitsuba_zb_mirrored_camera() {
+    validate("zb-mirror-camera", 1024);
+    let xml = repo("tests/data/mitsuba/zb-mirror-camera.xml");
+    let text = std::fs::read_to_string(&xml).unwrap();
+    let plain = text.replace("<scale x=\"-1\"/>", "");
+    assert_ne!(plain, text);
+    let scene = zerovar::scene::load_str(&xml, &plain, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let plain = agreement("zb-mirror-camera", &scene, 1024);
+    assert!(!plain.passes(), "an unmirrored image must disagree: {plain:?}");
+}

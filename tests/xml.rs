@@ -994,6 +994,23 @@ fn focal_lengths_give_mitsubas_fields_of_view() {
             2.0 * half
         );
     }
+    // `fov_axis` in any case, and across the diagonal: from the centre to a corner is half
+    // the field of view.
+    let axis = |axis: &str| {
+        let text = format!(
+            "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"60\"/>\
+             <string name=\"fov_axis\" value=\"{axis}\"/><film type=\"hdrfilm\">\
+             <integer name=\"width\" value=\"64\"/><integer name=\"height\" value=\"32\"/>\
+             </film></sensor><shape type=\"sphere\"/></scene>"
+        );
+        xml("axis.xml", &text, &[]).unwrap_or_else(|e| panic!("{axis}: {e}"))
+    };
+    let corner = Vec2::new(0.0, 0.0);
+    assert_eq!(axis("Y").camera().ray(corner).direction, axis("y").camera().ray(corner).direction);
+    let s = axis("diagonal");
+    let centre = s.camera().ray(Vec2::new(32.0, 16.0)).direction;
+    let half = centre.dot(s.camera().ray(corner).direction).clamp(-1.0, 1.0).acos().to_degrees();
+    assert!((half - 30.0).abs() < 1e-3, "{half}");
     let both = "<scene version=\"3.0.0\"><sensor type=\"perspective\"><float name=\"fov\" value=\"40\"/>\
                 <string name=\"focal_length\" value=\"35mm\"/></sensor></scene>";
     let e = xml("both.xml", both, &[]).unwrap_err().to_string();

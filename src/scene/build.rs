@@ -56,6 +56,11 @@ fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
     let Some(to_world) = Transform::look_at(cam.origin, cam.target, cam.up) else {
         return cx.err("origin equals target, or up is parallel to the view direction");
     };
+    // A mirror flips the camera's local x (its left) before the look-at frame.
+    let to_world = match Transform::scale(glam::Vec3::new(-1.0, 1.0, 1.0)) {
+        Some(flip) if cam.mirror => flip.then(&to_world),
+        _ => to_world,
+    };
     if !(cam.fov > 0.0 && cam.fov < 180.0) {
         return cx.err(format!("fov {} must lie strictly between 0 and 180 degrees", cam.fov));
     }

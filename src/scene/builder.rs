@@ -130,6 +130,7 @@ impl CameraDesc {
             near_clip: 0.0,
             far_clip: f32::INFINITY,
             filter: Default::default(),
+            mirror: false,
         }
     }
 }

@@ -162,6 +162,10 @@ pub struct CameraDesc {
     /// How each pixel's samples spread over the film (default: a box, uniform in the pixel).
     #[serde(default)]
     pub filter: crate::filter::PixelFilter,
+    /// Whether the image is mirrored left to right, as a Mitsuba camera whose `to_world`
+    /// scales by -1 sees it (default false).
+    #[serde(default)]
+    pub mirror: bool,
 }
 
 fn up() -> Vec3 {

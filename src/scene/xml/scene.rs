@@ -153,19 +153,32 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
     };
     p.finish()?;
 
-    let axis = |fov_axis: Option<(&str, &super::tree::Prop)>| match fov_axis {
-        None | Some(("x", _)) => Ok(FovAxis::X),
-        Some(("y", _)) => Ok(FovAxis::Y),
-        Some(("smaller", _)) if resolution[0] > resolution[1] => Ok(FovAxis::Y),
-        Some(("smaller", _)) => Ok(FovAxis::X),
-        Some(("larger", _)) if resolution[0] > resolution[1] => Ok(FovAxis::X),
-        Some(("larger", _)) => Ok(FovAxis::Y),
-        Some((other, prop)) => Err(prop
-            .pos
-            .err(format!("fov_axis \"{other}\" is not supported; use x, y, smaller or larger"))),
+    let aspect = resolution[0] as f64 / resolution[1] as f64;
+    // The horizontal field of view whose tangent span across the image's diagonal is
+    // `diagonal`.
+    let across_width = |diagonal: f64| {
+        let width = diagonal / (1.0 + 1.0 / (aspect * aspect)).sqrt();
+        (2.0 * (0.5 * width).atan()).to_degrees() as f32
+    };
+    // Mitsuba reads the axis in any case.
+    let fov_axis = fov_axis.map(|(name, prop)| (name.to_ascii_lowercase(), prop));
+    let axis = |fov: f32| match fov_axis.as_ref().map(|(name, prop)| (name.as_str(), prop)) {
+        None | Some(("x", _)) => Ok((fov, FovAxis::X)),
+        Some(("y", _)) => Ok((fov, FovAxis::Y)),
+        Some(("smaller", _)) if resolution[0] > resolution[1] => Ok((fov, FovAxis::Y)),
+        Some(("smaller", _)) => Ok((fov, FovAxis::X)),
+        Some(("larger", _)) if resolution[0] > resolution[1] => Ok((fov, FovAxis::X)),
+        Some(("larger", _)) => Ok((fov, FovAxis::Y)),
+        Some(("diagonal", _)) => {
+            let span = 2.0 * (0.5 * f64::from(fov)).to_radians().tan();
+            Ok((across_width(span), FovAxis::X))
+        }
+        Some((other, prop)) => Err(prop.pos.err(format!(
+            "fov_axis \"{other}\" is not supported; use x, y, diagonal, smaller or larger"
+        ))),
     };
     let (fov, fov_axis) = match fov {
-        Some(fov) => (fov, axis(fov_axis)?),
+        Some(fov) => axis(fov)?,
         None => {
             // Mitsuba's default: a 50 mm lens on a 36 x 24 mm film, its field of view spanning
             // the image's diagonal (`fov_axis` then does not apply).
@@ -176,15 +189,11 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
                     "focal_length \"{text}\" is not a length in millimetres; give it as \"50mm\""
                 )));
             };
-            let aspect = resolution[0] as f64 / resolution[1] as f64;
-            // The diagonal's tangent span, then the width's.
-            let diagonal = 36.0f64.hypot(24.0) / mm;
-            let width = diagonal / (1.0 + 1.0 / (aspect * aspect)).sqrt();
-            ((2.0 * (0.5 * width).atan()).to_degrees() as f32, FovAxis::X)
+            (across_width(36.0f64.hypot(24.0) / mm), FovAxis::X)
         }
     };
-    let (origin, target, up) = match steps {
-        [TransformStep::Lookat { origin, target, up }] => (*origin, *target, *up),
+    let (origin, target, up, mirror) = match steps {
+        [TransformStep::Lookat { origin, target, up }] => (*origin, *target, *up, false),
         _ => {
             let t = compose(steps, &o.pos, "the sensor's to_world")?;
             let m = t.m.matrix3;
@@ -195,14 +204,9 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
                      camera's to_world too, so remove the <scale>",
                 ));
             }
-            if m.determinant() < 0.0 {
-                return Err(p.err(
-                    "the to_world transform mirrors (a negative scale), which zerovar's look-at \
-                     camera cannot express; remove the mirroring <scale>",
-                ));
-            }
+            // A mirror (Mitsuba allows it: a scale of -1) flips the image left to right.
             let origin = Vec3::from(t.m.translation);
-            (origin, origin + Vec3::from(m.z_axis), Vec3::from(m.y_axis))
+            (origin, origin + Vec3::from(m.z_axis), Vec3::from(m.y_axis), m.determinant() < 0.0)
         }
     };
     let camera = CameraDesc {
@@ -216,6 +220,7 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
         near_clip,
         far_clip,
         filter,
+        mirror,
     };
     Ok((spanned(&o.pos, camera), render))
 }
