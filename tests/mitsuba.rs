@@ -392,3 +392,17 @@ fn mitsuba_zb_mirrored_camera() {
     let plain = agreement("zb-mirror-camera", &scene, 1024);
     assert!(!plain.passes(), "an unmirrored image must disagree: {plain:?}");
 }
+
+/// A `gridvolume` with `use_grid_bbox`: the grid fills the box its `.vol` header gives, moved
+/// by `to_world` (the unit cube instead disagrees).
+#[test]
+fn mitsuba_zc_grid_bounding_box() {
+    validate("zc-grid-bbox", 4096);
+    let xml = repo("tests/data/mitsuba/zc-grid-bbox.xml");
+    let text = std::fs::read_to_string(&xml).unwrap();
+    let unit = text.replace("value=\"true\"", "value=\"false\"");
+    assert_ne!(unit, text);
+    let scene = zerovar::scene::load_str(&xml, &unit, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let unit = agreement("zc-grid-bbox", &scene, 1024);
+    assert!(!unit.passes(), "the grid in the unit cube must disagree: {unit:?}");
+}

@@ -128,6 +128,32 @@ impl VolGrid {
         Self::parse(path, &bytes)
     }
 
+    /// The bounding box a `.vol` file's header gives (`min`, `max`), read without the grid:
+    /// where Mitsuba's `use_grid_bbox` places it.
+    pub fn read_bounds(path: &Path) -> Result<[glam::Vec3; 2], VolError> {
+        use std::io::Read;
+        let header = |what: String| VolError::Header { path: path.into(), what };
+        let mut bytes = [0u8; HEADER_BYTES];
+        std::fs::File::open(path)
+            .and_then(|mut f| f.read_exact(&mut bytes))
+            .map_err(|source| VolError::Io { path: path.into(), source })?;
+        if &bytes[..3] != b"VOL" {
+            return Err(header("it does not start with the bytes 'VOL'".into()));
+        }
+        let float =
+            |i: usize| f32::from_le_bytes(bytes[24 + 4 * i..28 + 4 * i].try_into().unwrap());
+        let (lo, hi) = (
+            glam::Vec3::new(float(0), float(1), float(2)),
+            glam::Vec3::new(float(3), float(4), float(5)),
+        );
+        if !(lo.is_finite() && hi.is_finite() && lo.cmplt(hi).all()) {
+            return Err(header(format!(
+                "its bounding box {lo} to {hi} is not a box (use_grid_bbox needs one)"
+            )));
+        }
+        Ok([lo, hi])
+    }
+
     /// Parses the bytes of a `.vol` file; `path` only names it in errors.
     pub fn parse(path: &Path, bytes: &[u8]) -> Result<Self, VolError> {
         let header = |what: String| VolError::Header { path: path.into(), what };

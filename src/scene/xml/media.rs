@@ -185,10 +185,30 @@ impl Conv {
                         )));
                     }
                 }
-                if v.boolean("use_grid_bbox")? == Some(true) {
-                    return Err(v.err(
-                        "use_grid_bbox = true is not supported; place the unit cube with to_world",
-                    ));
+                // Options that change nothing in Mitsuba's RGB variants (`raw`, `accel`), and a
+                // majorant hint (`max_value`): zerovar bounds its grids itself.
+                v.boolean("raw")?;
+                v.boolean("accel")?;
+                v.float("max_value")?;
+                let mut transform = transform;
+                if let Some(at) = v.raw("use_grid_bbox")
+                    && v.boolean("use_grid_bbox")? == Some(true)
+                {
+                    // The grid fills the box its .vol header gives, which to_world then moves.
+                    if is_vdb(&file) {
+                        return Err(at.pos.err(
+                            "use_grid_bbox applies to .vol files; a .vdb grid is placed by its own \
+                             index-to-world map",
+                        ));
+                    }
+                    let [lo, hi] = crate::media::VolGrid::read_bounds(&self.root_dir.join(&file))
+                        .map_err(|e| at.pos.err(e.to_string()))?;
+                    let mut steps = vec![
+                        TransformStep::Scale(Rgb::Rgb((hi - lo).to_array())),
+                        TransformStep::Translate(lo),
+                    ];
+                    steps.append(&mut transform);
+                    transform = steps;
                 }
                 // A zerovar extension: Mitsuba reads only .vol files here.
                 let grid_name = match v.string("grid_name")? {
