@@ -406,3 +406,20 @@ fn mitsuba_zc_grid_bounding_box() {
     let unit = agreement("zc-grid-bbox", &scene, 1024);
     assert!(!unit.passes(), "the grid in the unit cube must disagree: {unit:?}");
 }
+
+/// Texture coordinates of PLY meshes: as written by default (Mitsuba's PLY reader), flipped
+/// in v by `flip_tex_coords` (OBJ's default instead disagrees).
+#[test]
+fn mitsuba_zd_ply_texture_coordinates() {
+    validate("zd-ply-uv", 1024);
+    let xml = repo("tests/data/mitsuba/zd-ply-uv.xml");
+    let text = std::fs::read_to_string(&xml).unwrap();
+    let flipped = text.replace(
+        "</transform>\n        <bsdf",
+        "</transform>\n        <boolean name=\"flip_tex_coords\" value=\"true\"/><bsdf",
+    );
+    assert_ne!(flipped, text);
+    let scene = zerovar::scene::load_str(&xml, &flipped, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let flipped = agreement("zd-ply-uv", &scene, 1024);
+    assert!(!flipped.passes(), "v flipped as OBJ flips it must disagree: {flipped:?}");
+}

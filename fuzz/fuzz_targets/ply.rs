@@ -7,5 +7,5 @@ use zerovar::shapes::Mesh;
 use zerovar::transform::Transform;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = Mesh::from_ply_bytes(data, &Transform::IDENTITY, false);
+    let _ = Mesh::from_ply_bytes(data, &Transform::IDENTITY, false, false);
 });

@@ -400,7 +400,7 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
             })
         }
         "obj" | "ply" | "serialized" => {
-            let only_obj = [("flip_tex_coords", d.kind != "obj" && d.flip_tex_coords.is_some())];
+            let only_obj = [("flip_tex_coords", d.kind == "serialized" && d.flip_tex_coords.is_some())];
             let only_serialized = [("shape_index", d.kind != "serialized" && d.shape_index.is_some())];
             cx.only(
                 &format!("{} meshes", d.kind),
@@ -416,7 +416,11 @@ fn geometry(cx: &Ctx<'_>, d: &ShapeDesc) -> Result<Geometry> {
                     let flip = d.flip_tex_coords.unwrap_or(true);
                     Mesh::from_obj(&file, &to_world, face_normals, flip)
                 }
-                "ply" => Mesh::from_ply(&file, &to_world, face_normals),
+                // Mitsuba's PLY reader flips v only when asked.
+                "ply" => {
+                    let flip = d.flip_tex_coords.unwrap_or(false);
+                    Mesh::from_ply(&file, &to_world, face_normals, flip)
+                }
                 _ => {
                     let index = d.shape_index.unwrap_or(0);
                     Mesh::from_serialized(&file, index, &to_world, face_normals)

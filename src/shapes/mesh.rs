@@ -149,8 +149,9 @@ impl Mesh {
         path: &Path,
         to_world: &Transform,
         face_normals: bool,
+        flip_v: bool,
     ) -> Result<Self, MeshError> {
-        Self::from_ply_bytes(&crate::files::read(path)?, to_world, face_normals)
+        Self::from_ply_bytes(&crate::files::read(path)?, to_world, face_normals, flip_v)
     }
 
     /// Reads mesh `index` of a Mitsuba `.serialized` file. Vertex normals are used unless
@@ -181,10 +182,14 @@ impl Mesh {
         data: &[u8],
         to_world: &Transform,
         face_normals: bool,
+        flip_v: bool,
     ) -> Result<Self, MeshError> {
         let ply = super::ply::read(data)?;
         let normals = ply.normals.filter(|_| !face_normals);
-        Self::new(ply.positions, normals, ply.uvs, ply.triangles, to_world)
+        let uvs = ply.uvs.map(|uvs| {
+            uvs.into_iter().map(|t| if flip_v { Vec2::new(t.x, 1.0 - t.y) } else { t }).collect()
+        });
+        Self::new(ply.positions, normals, uvs, ply.triangles, to_world)
     }
 
     /// Mitsuba's `rectangle`: [-1, 1]^2 in the z = 0 plane, facing +z, as two triangles: the

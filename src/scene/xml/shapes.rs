@@ -39,9 +39,9 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         };
         filename = Some(conv.file(name, prop)?);
         face_normals = p.boolean("face_normals")?;
-        // Only Mitsuba's OBJ reader flips v (PLY has no such option).
-        if o.kind == "obj" {
-            flip_uv = p.boolean("flip_tex_coords")?.unwrap_or(true);
+        // Mitsuba's OBJ reader flips v by default, its PLY reader only when asked.
+        if o.kind == "obj" || o.kind == "ply" {
+            flip_uv = p.boolean("flip_tex_coords")?.unwrap_or(o.kind == "obj");
         }
         if o.kind == "serialized" {
             shape_index =
@@ -96,17 +96,6 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         }),
         b => b,
     };
-    let textured = bsdf.as_ref().is_some_and(|b| {
-        [&b.reflectance, &b.diffuse_reflectance]
-            .iter()
-            .any(|t| matches!(t, Some(TextureDesc::Checkerboard(_) | TextureDesc::Bitmap(_))))
-    });
-    if o.kind == "ply" && textured {
-        return Err(p.err(
-            "textures on PLY meshes are not supported (their texture coordinates are not \
-             validated against Mitsuba); use an OBJ mesh or an untextured bsdf",
-        ));
-    }
     let desc = ShapeDesc {
         kind: o.kind.clone(),
         center,
@@ -115,7 +104,7 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
         p1,
         filename,
         face_normals,
-        flip_tex_coords: (o.kind == "obj").then_some(flip_uv),
+        flip_tex_coords: (o.kind == "obj" || o.kind == "ply").then_some(flip_uv),
         shape_index,
         transform,
         flip_normals,
