@@ -139,6 +139,18 @@ fn validate_scene(name: &str, scene: &zerovar::scene::Scene, spp: u32) {
     assert!(agreement.passes(), "{name}: zerovar disagrees with Mitsuba 3: {agreement:?}");
 }
 
+/// Asserts that `tests/data/mitsuba/{name}.xml` with `from` replaced by `to` disagrees with
+/// Mitsuba's image at `spp`: the validation sees what the edit changes (`what` says it).
+fn edited_disagrees(name: &str, spp: u32, from: &str, to: &str, what: &str) {
+    let xml = repo(&format!("tests/data/mitsuba/{name}.xml"));
+    let text = std::fs::read_to_string(&xml).unwrap();
+    let edited = text.replace(from, to);
+    assert_ne!(edited, text, "{name}: `{from}` is not in the scene");
+    let scene = zerovar::scene::load_str(&xml, &edited, &[]).unwrap_or_else(|e| panic!("{e}"));
+    let edited = agreement(name, &scene, spp);
+    assert!(!edited.passes(), "{what} must disagree with Mitsuba's image: {edited:?}");
+}
+
 /// How `scene`'s render agrees with `{name}.exr`; panics when a 5% change to it would pass.
 fn agreement(name: &str, scene: &zerovar::scene::Scene, spp: u32) -> Agreement {
     let theirs = read_reference(&repo(&format!("tests/data/mitsuba/{name}.exr")));
@@ -326,13 +338,8 @@ fn mitsuba_s_masks_in_fog() {
 #[test]
 fn mitsuba_t_default_gaussian_filter_and_hidden_emitters() {
     validate("t-gaussian-hidden", 1024);
-    let xml = repo("tests/data/mitsuba/t-gaussian-hidden.xml");
-    let text = std::fs::read_to_string(&xml).unwrap();
-    let boxed = text.replace("</film>", "<rfilter type=\"box\"/></film>");
-    assert_ne!(boxed, text);
-    let scene = zerovar::scene::load_str(&xml, &boxed, &[]).unwrap_or_else(|e| panic!("{e}"));
-    let boxed = agreement("t-gaussian-hidden", &scene, 1024);
-    assert!(!boxed.passes(), "a box filter must disagree with Mitsuba's Gaussian: {boxed:?}");
+    let boxed = "<rfilter type=\"box\"/></film>";
+    edited_disagrees("t-gaussian-hidden", 1024, "</film>", boxed, "a box filter");
 }
 
 /// A tent filter of radius 1.5.
@@ -384,13 +391,7 @@ fn mitsuba_z_sun_in_unbounded_fog() {
 #[test]
 fn mitsuba_zb_mirrored_camera() {
     validate("zb-mirror-camera", 1024);
-    let xml = repo("tests/data/mitsuba/zb-mirror-camera.xml");
-    let text = std::fs::read_to_string(&xml).unwrap();
-    let plain = text.replace("<scale x=\"-1\"/>", "");
-    assert_ne!(plain, text);
-    let scene = zerovar::scene::load_str(&xml, &plain, &[]).unwrap_or_else(|e| panic!("{e}"));
-    let plain = agreement("zb-mirror-camera", &scene, 1024);
-    assert!(!plain.passes(), "an unmirrored image must disagree: {plain:?}");
+    edited_disagrees("zb-mirror-camera", 1024, "<scale x=\"-1\"/>", "", "an unmirrored image");
 }
 
 /// A `gridvolume` with `use_grid_bbox`: the grid fills the box its `.vol` header gives, moved
@@ -398,13 +399,8 @@ fn mitsuba_zb_mirrored_camera() {
 #[test]
 fn mitsuba_zc_grid_bounding_box() {
     validate("zc-grid-bbox", 4096);
-    let xml = repo("tests/data/mitsuba/zc-grid-bbox.xml");
-    let text = std::fs::read_to_string(&xml).unwrap();
-    let unit = text.replace("value=\"true\"", "value=\"false\"");
-    assert_ne!(unit, text);
-    let scene = zerovar::scene::load_str(&xml, &unit, &[]).unwrap_or_else(|e| panic!("{e}"));
-    let unit = agreement("zc-grid-bbox", &scene, 1024);
-    assert!(!unit.passes(), "the grid in the unit cube must disagree: {unit:?}");
+    let unit = "value=\"false\"";
+    edited_disagrees("zc-grid-bbox", 1024, "value=\"true\"", unit, "the grid in the unit cube");
 }
 
 /// Texture coordinates of PLY meshes: as written by default (Mitsuba's PLY reader), flipped
@@ -412,14 +408,9 @@ fn mitsuba_zc_grid_bounding_box() {
 #[test]
 fn mitsuba_zd_ply_texture_coordinates() {
     validate("zd-ply-uv", 1024);
-    let xml = repo("tests/data/mitsuba/zd-ply-uv.xml");
-    let text = std::fs::read_to_string(&xml).unwrap();
-    let flipped = text.replace(
+    let (from, flipped) = (
         "</transform>\n        <bsdf",
-        "</transform>\n        <boolean name=\"flip_tex_coords\" value=\"true\"/><bsdf",
+        "</transform><boolean name=\"flip_tex_coords\" value=\"true\"/><bsdf",
     );
-    assert_ne!(flipped, text);
-    let scene = zerovar::scene::load_str(&xml, &flipped, &[]).unwrap_or_else(|e| panic!("{e}"));
-    let flipped = agreement("zd-ply-uv", &scene, 1024);
-    assert!(!flipped.passes(), "v flipped as OBJ flips it must disagree: {flipped:?}");
+    edited_disagrees("zd-ply-uv", 1024, from, flipped, "v flipped as OBJ flips it");
 }
