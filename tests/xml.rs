@@ -329,6 +329,21 @@ fn references_may_come_before_their_objects() {
     let deep = late.replace("</scene>", &format!("{chain}</scene>"));
     let err = xml("deep.xml", &deep, &[]).expect_err("too deep").to_string();
     assert!(err.contains("deep.xml:") && err.contains("nested more than"), "{err}");
+    // Nesting within each object, each as deep as the reader allows, times a chain of
+    // references: the whole depth is bounded too.
+    let nested: String = (0..64)
+        .map(|k| {
+            let open = r#"<texture type="checkerboard" name="color0">"#.repeat(62);
+            let close = "</texture>".repeat(62);
+            format!(
+                r#"<texture type="checkerboard" id="n{k}">{open}<ref name="color0" id="n{}"/>{close}</texture>"#,
+                k + 1
+            )
+        })
+        .collect();
+    let deep = late.replace("</scene>", &format!("{nested}</scene>"));
+    let err = xml("nested.xml", &deep, &[]).expect_err("too deep").to_string();
+    assert!(err.contains("nested.xml:") && err.contains("through <ref>"), "{err}");
 }
 
 #[test]
@@ -1612,4 +1627,22 @@ fn jpeg_textures_and_radiance_hdr_environment_maps() {
     assert_eq!((up, down), ([1.5; 3], [0.25; 3]));
     let e = xml("gif-sky.xml", &env("tex.gif"), &[]).unwrap_err().to_string();
     assert!(e.contains("gif-sky.xml:") && e.contains("Radiance HDR (.hdr)"), "{e}");
+}
+
+/// A directional light's shadow rays reach twice the larger of the scene's bounding radius and
+/// the point's distance from its centre, where Mitsuba places the light: spheres of radius 1 at
+/// x = 0 and x = 4 span a box centred at x = 2 of half-diagonal sqrt(11).
+#[test]
+fn the_sun_is_twice_the_scenes_radius_away() {
+    let s = crate::common::scene(
+        "[camera]\norigin = [0, 0, 9]\ntarget = [0, 0, 0]\nfov = 40\nresolution = [8, 8]\n\
+         [[shapes]]\ntype = \"sphere\"\n[[shapes]]\ntype = \"sphere\"\ncenter = [4, 0, 0]\n",
+    );
+    let radius = 11.0f32.sqrt();
+    let centre = Vec3A::new(2.0, 0.0, 0.0);
+    assert!((s.sun_reach(centre) - 2.0 * radius).abs() < 1e-4, "{}", s.sun_reach(centre));
+    let inside = Vec3A::new(2.5, 0.5, 0.0);
+    assert!((s.sun_reach(inside) - 2.0 * radius).abs() < 1e-4);
+    let far = Vec3A::new(22.0, 0.0, 0.0);
+    assert!((s.sun_reach(far) - 40.0).abs() < 1e-4, "{}", s.sun_reach(far));
 }

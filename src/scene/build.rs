@@ -319,7 +319,8 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
     let point_lights = lights.iter().filter_map(Light::point_light).collect();
     let trackers = media.iter().map(Tracker::for_medium).collect();
     let bvh = Bvh::build(&shapes);
-    let world = bounding_sphere(&bvh, &media);
+    let unbounded = [camera_medium, global_medium];
+    let world = bounding_sphere(&bvh, unbounded.iter().flatten().map(|&m| &media[m as usize]));
     Ok(Scene {
         path: path.to_path_buf(),
         shapes,
@@ -339,10 +340,11 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
     })
 }
 
-/// The sphere around the shapes (Mitsuba's scene bounds) and the boxes of bounded media: where
-/// a directional light is placed (see [`Scene::sun_reach`]).
-fn bounding_sphere(bvh: &Bvh, media: &[Medium]) -> (glam::Vec3A, f32) {
-    let boxes = media.iter().filter_map(|m| match &m.kind {
+/// The sphere around the shapes (Mitsuba's scene bounds), and around the boxes of `open`
+/// media (the camera's and the global one) where they are grids, which no shape need enclose:
+/// where a directional light is placed (see [`Scene::sun_reach`]).
+fn bounding_sphere<'m>(bvh: &Bvh, open: impl Iterator<Item = &'m Medium>) -> (glam::Vec3A, f32) {
+    let boxes = open.filter_map(|m| match &m.kind {
         MediumKind::Heterogeneous(h) => Some(h.bounds()),
         MediumKind::Homogeneous { .. } => None,
     });
@@ -660,6 +662,8 @@ fn read_picture(
     file: &Path,
     raw: bool,
 ) -> std::result::Result<(usize, usize, Vec<[f32; 3]>), String> {
+    // A regular file of bounded size: not a pipe that blocks the read.
+    crate::files::check(file).map_err(|e| format!("{}: {e}", file.display()))?;
     let is = |ext: &str| file.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext));
     if is("exr") {
         return crate::output::read_exr(file).map_err(|e| e.to_string());
@@ -668,7 +672,7 @@ fn read_picture(
         ("PNG", false)
     } else if is("jpg") || is("jpeg") {
         ("JPEG", false)
-    } else if is("hdr") || is("rgbe") {
+    } else if is("hdr") {
         ("Radiance HDR", true)
     } else {
         return Err(format!(
@@ -696,7 +700,6 @@ fn read_picture(
 /// [0, 1].
 fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc) -> Result<Texture> {
     let file = cx.file(&d.filename);
-    crate::files::check(&file).or_else(|e| cx.err(format!("{}: {e}", file.display())))?;
     let (width, height, texels) =
         read_picture(&file, d.raw.unwrap_or(false)).or_else(|e| cx.err(e))?;
     let bilinear = match d.filter_type.as_deref() {

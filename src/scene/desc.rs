@@ -433,7 +433,7 @@ pub struct LightDesc {
     pub angular_diameter: Option<f32>,
     /// Constant: radiance.
     pub radiance: Option<Rgb>,
-    /// Envmap: lat-long EXR file.
+    /// Envmap: lat-long image file (OpenEXR, Radiance HDR, PNG or JPEG).
     pub filename: Option<String>,
     /// Envmap: multiplies the image.
     pub scale: Option<f32>,

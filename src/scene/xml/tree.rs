@@ -1,7 +1,7 @@
 //! Reading Mitsuba 3 XML into a tree of plugin objects with typed, named properties, before
 //! any plugin is interpreted: `<default>` values and `-D` overrides substituted for `$name` in
 //! attribute values, `<include>` files spliced in (cycles rejected), `<ref id>` resolved to
-//! the object defined earlier, transforms read into `TransformStep` lists, and every element,
+//! the object of that id (defined before or after it, as in Mitsuba), transforms read into `TransformStep` lists, and every element,
 //! attribute and value checked against the format, with an error at its line and column.
 
 use crate::scene::desc::{Rgb, TransformStep};
@@ -140,7 +140,8 @@ pub(super) fn read(
     };
     let (pos, props) = reader.file(path, source, true)?;
     let props = if reader.forward_refs {
-        let mut linker = Linker { ids: &reader.ids, done: HashMap::new(), open: Vec::new() };
+        let mut linker =
+            Linker { ids: &reader.ids, done: HashMap::new(), open: Vec::new(), depth: 0 };
         linker.props(&props)?
     } else {
         props
@@ -162,6 +163,8 @@ struct Linker<'a> {
     done: HashMap<String, Rc<Object>>,
     /// Ids being linked, outermost first.
     open: Vec<String>,
+    /// Objects being rebuilt, nested in each other and through references.
+    depth: usize,
 }
 
 impl Linker<'_> {
@@ -215,12 +218,24 @@ impl Linker<'_> {
     }
 
     fn rebuilt(&mut self, o: &Object) -> Result<Rc<Object>> {
+        // Nesting within the file and chains of references multiply: the whole depth is
+        // bounded, so a hostile file cannot overflow the stack.
+        if self.depth >= 2 * MAX_NESTING {
+            return Err(o.pos.err(format!(
+                "objects nested more than {} deep, counting those reached through <ref>; no \
+                 scene needs that",
+                2 * MAX_NESTING
+            )));
+        }
+        self.depth += 1;
+        let props = self.props(&o.props);
+        self.depth -= 1;
         Ok(Rc::new(Object {
             tag: o.tag.clone(),
             kind: o.kind.clone(),
             id: o.id.clone(),
             pos: o.pos.clone(),
-            props: self.props(&o.props)?,
+            props: props?,
         }))
     }
 }
