@@ -68,10 +68,9 @@ impl Halo {
         let sum: f32 = self
             .axes
             .iter()
-            .map(|&a| match angle(w, a) {
-                None => 0.0,
-                Some((theta, _)) if theta > CAP => 0.0,
-                Some((_, s)) => 1.0 / (std::f32::consts::TAU * CAP * s.max(1e-6f32.sin())),
+            .map(|&a| {
+                in_cap(w, a)
+                    .map_or(0.0, |s| 1.0 / (std::f32::consts::TAU * CAP * s.max(1e-6f32.sin())))
             })
             .sum();
         sum / self.axes.len() as f32
@@ -80,21 +79,21 @@ impl Halo {
     /// Whether `w` lies in some light's cap, where its ray may pass close to the light and
     /// bring back far more than a fitted mixture says.
     pub fn covers(&self, w: Vec3A) -> bool {
-        self.axes.iter().any(|&a| angle(w, a).is_some_and(|(theta, _)| theta <= CAP))
+        self.axes.iter().any(|&a| in_cap(w, a).is_some())
     }
 }
 
-/// The angle between unit vectors `w` and `a`, and its sine, or `None` where it is surely
-/// beyond [`CAP`]: atan2 of the sine and cosine keeps it accurate near the axis, where acos
-/// of a rounded cosine is not.
+/// The sine of the angle between unit vectors `w` and `a` where that angle is within [`CAP`]:
+/// most directions are rejected by their cosine alone, the rest by the angle as atan2 of the
+/// sine and cosine, accurate near the axis where acos of a rounded cosine is not.
 #[inline]
-fn angle(w: Vec3A, a: Vec3A) -> Option<(f32, f32)> {
+fn in_cap(w: Vec3A, a: Vec3A) -> Option<f32> {
     let c = w.dot(a);
     if c < OUTSIDE_CAP_COS {
         return None;
     }
     let s = w.cross(a).length();
-    Some((s.atan2(c), s))
+    (s.atan2(c) <= CAP).then_some(s)
 }
 
 #[cfg(test)]

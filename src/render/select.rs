@@ -39,8 +39,8 @@ const NS_PER_DENSITY_LOOKUP: f64 = 114.0;
 const NS_PER_GUIDED_DENSITY_LOOKUP: f64 = 83.0;
 const NS_PER_FIELD_LOOKUP: f64 = 161.0;
 const NS_PER_PRODUCT: f64 = 288.0;
-/// The reweighted product's fitted figure: criterion times the one-lobe product that replaced
-/// it the same (135 against 138 ns to load and apply, 20 ns a density, 100 ns a sample).
+/// The fitted cost of the reweighted product, which the one-lobe product replaced at the same
+/// criterion cost (docs/experiments.md).
 const NS_PER_LOBE_PRODUCT: f64 = 191.0;
 /// Extra collisions for delta lights, with the flights whose parts were weighed but drew none.
 const NS_PER_EXTRA_COLLISION: f64 = 433.0;
