@@ -1112,26 +1112,44 @@ fn plastic_defaults_parameters_and_two_sides() {
 fn rough_bsdfs_defaults_parameters_and_errors() {
     use zerovar::bsdf::{Bsdf, Microfacet, MicrofacetKind, RoughDielectric, RoughPlastic, Texture};
     use zerovar::math::Spectrum;
-    let beckmann = Microfacet { kind: MicrofacetKind::Beckmann, alpha: 0.1 };
+    let beckmann = Microfacet::isotropic(MicrofacetKind::Beckmann, 0.1);
     let s = xml("rough.xml", &sphere_with("<bsdf type=\"roughplastic\"/>"), &[]).unwrap();
     let grey = Texture::Constant(Spectrum::splat(0.5));
     let default = RoughPlastic::new(grey.clone(), Spectrum::ONE, 1.49 / 1.000_277, false, beckmann);
     assert_eq!(s.surfaces()[0].bsdf, Bsdf::RoughPlastic(default));
     let s = xml("rough-2.xml", &sphere_with("<bsdf type=\"roughdielectric\"/>"), &[]).unwrap();
-    let glass = RoughDielectric { microfacet: beckmann, eta: 1.5046 / 1.000_277 };
+    let glass = RoughDielectric { roughness: beckmann.into(), eta: 1.5046 / 1.000_277 };
     assert_eq!(s.surfaces()[0].bsdf, Bsdf::RoughDielectric(glass));
     let given = "<bsdf type=\"twosided\"><bsdf type=\"roughplastic\"><string name=\"distribution\" \
                  value=\"GGX\"/><float name=\"alpha\" value=\"0.3\"/><boolean name=\"sample_visible\" \
                  value=\"false\"/><float name=\"int_ior\" value=\"1.5\"/></bsdf></bsdf>";
     let s = xml("rough-3.xml", &sphere_with(given), &[]).unwrap();
-    let ggx = Microfacet { kind: MicrofacetKind::Ggx, alpha: 0.3 };
+    let ggx = Microfacet::isotropic(MicrofacetKind::Ggx, 0.3);
     let expected = RoughPlastic::new(grey, Spectrum::ONE, 1.5 / 1.000_277, false, ggx);
     assert_eq!(s.surfaces()[0].bsdf, Bsdf::RoughPlastic(expected.with_two_sided(true)));
     for (bsdf, needle) in [
         (
-            "<bsdf type=\"roughdielectric\"><float name=\"alpha_u\" value=\"0.1\"/>\
+            "<bsdf type=\"roughdielectric\"><float name=\"alpha_u\" value=\"0.1\"/></bsdf>",
+            "anisotropic roughness needs both `alpha_u` and `alpha_v`",
+        ),
+        (
+            "<bsdf type=\"roughconductor\"><float name=\"alpha\" value=\"0.1\"/>\
+             <float name=\"alpha_u\" value=\"0.1\"/><float name=\"alpha_v\" value=\"0.2\"/></bsdf>",
+            "give either `alpha` or `alpha_u` and `alpha_v`, not both",
+        ),
+        (
+            "<bsdf type=\"roughplastic\"><float name=\"alpha_u\" value=\"0.1\"/>\
              <float name=\"alpha_v\" value=\"0.2\"/></bsdf>",
-            "anisotropic roughness (alpha_u, alpha_v) is not supported",
+            "a roughplastic takes one `alpha`, as in Mitsuba",
+        ),
+        (
+            "<bsdf type=\"roughplastic\"><texture type=\"checkerboard\" name=\"alpha\"/></bsdf>",
+            "a roughplastic's `alpha` is a number, as in Mitsuba",
+        ),
+        (
+            "<bsdf type=\"roughconductor\"><texture type=\"checkerboard\" name=\"alpha\">\
+             <float name=\"color0\" value=\"0\"/></texture></bsdf>",
+            "alpha down to 0 is not a roughness zerovar renders",
         ),
         (
             "<bsdf type=\"roughplastic\"><string name=\"distribution\" value=\"phong\"/></bsdf>",
@@ -1174,21 +1192,21 @@ fn conductors_defaults_materials_and_sides() {
     };
     let mirror =
         Metal { eta: Spectrum::ZERO, k: Spectrum::ONE, specular: Spectrum::ONE, two_sided: false };
-    let beckmann = Microfacet { kind: MicrofacetKind::Beckmann, alpha: 0.1 };
+    let beckmann = Microfacet::isotropic(MicrofacetKind::Beckmann, 0.1);
     assert_eq!(load("metal.xml", "<bsdf type=\"conductor\"/>"), Bsdf::Conductor(Conductor(mirror)));
     assert_eq!(
         load("metal-2.xml", "<bsdf type=\"roughconductor\"/>"),
-        Bsdf::RoughConductor(RoughConductor { metal: mirror, microfacet: beckmann })
+        Bsdf::RoughConductor(RoughConductor { metal: mirror, roughness: beckmann.into() })
     );
     let (eta, k) = Metal::named("Au").unwrap();
     let gold = "<bsdf type=\"twosided\"><bsdf type=\"roughconductor\"><string name=\"material\" \
                 value=\"Au\"/><string name=\"distribution\" value=\"ggx\"/><float name=\"alpha\" \
                 value=\"0.2\"/><rgb name=\"specular_reflectance\" value=\"0.5, 0.6, 0.7\"/></bsdf></bsdf>";
     let metal = Metal { eta, k, specular: Spectrum::new(0.5, 0.6, 0.7), two_sided: true };
-    let microfacet = Microfacet { kind: MicrofacetKind::Ggx, alpha: 0.2 };
+    let roughness = Microfacet::isotropic(MicrofacetKind::Ggx, 0.2).into();
     assert_eq!(
         load("metal-3.xml", gold),
-        Bsdf::RoughConductor(RoughConductor { metal, microfacet })
+        Bsdf::RoughConductor(RoughConductor { metal, roughness })
     );
     let given = "<bsdf type=\"conductor\"><rgb name=\"eta\" value=\"0.2, 0.9, 1.1\"/></bsdf>";
     let metal = Metal { eta: Spectrum::new(0.2, 0.9, 1.1), ..mirror };
@@ -1288,8 +1306,8 @@ fn bitmap_textures_and_their_errors() {
 }
 
 /// Mitsuba's `mask`: its default opacity, a nested BSDF (here two-sided), and errors for what
-/// zerovar does not take: a mask without a BSDF, around one light passes itself, a textured or
-/// out-of-range opacity, and masks under Mitsuba's `path` integrator.
+/// zerovar does not take: a mask without a BSDF, around one light passes itself, an
+/// out-of-range opacity (constant or textured), and masks under Mitsuba's `path` integrator.
 #[test]
 fn masks_and_their_errors() {
     use zerovar::bsdf::{Bsdf, Texture};
@@ -1300,7 +1318,8 @@ fn masks_and_their_errors() {
     let s = xml("mask.xml", &volpath(&format!("<bsdf type=\"mask\">{diffuse}</bsdf>")), &[]);
     let grey = Texture::Constant(Spectrum::splat(0.5));
     let nested = Box::new(Bsdf::Diffuse { reflectance: grey, two_sided: true });
-    assert_eq!(s.unwrap().surfaces()[0].bsdf, Bsdf::Mask { opacity: 0.5, nested });
+    let half = Texture::Constant(Spectrum::splat(0.5));
+    assert_eq!(s.unwrap().surfaces()[0].bsdf, Bsdf::Mask { opacity: half, nested });
     for (bsdf, needle) in [
         ("<bsdf type=\"mask\"/>", "mask wraps exactly one <bsdf>"),
         (
@@ -1309,11 +1328,12 @@ fn masks_and_their_errors() {
         ),
         (
             "<bsdf type=\"mask\"><float name=\"opacity\" value=\"1.5\"/><bsdf type=\"diffuse\"/></bsdf>",
-            "opacity 1.5 must lie in [0, 1]",
+            "opacity 1.5 exceeds 1: it is a share of light, in [0, 1]",
         ),
         (
-            "<bsdf type=\"mask\"><texture type=\"checkerboard\" name=\"opacity\"/><bsdf type=\"diffuse\"/></bsdf>",
-            "a textured opacity is not supported",
+            "<bsdf type=\"mask\"><texture type=\"checkerboard\" name=\"opacity\">\
+             <float name=\"color1\" value=\"2\"/></texture><bsdf type=\"diffuse\"/></bsdf>",
+            "color1 2 exceeds 1",
         ),
     ] {
         let e = xml("mask-bad.xml", &volpath(bsdf), &[]).unwrap_err().to_string();
@@ -1629,20 +1649,20 @@ fn jpeg_textures_and_radiance_hdr_environment_maps() {
     assert!(e.contains("gif-sky.xml:") && e.contains("Radiance HDR (.hdr)"), "{e}");
 }
 
-/// A directional light's shadow rays reach twice the larger of the scene's bounding radius and
-/// the point's distance from its centre, where Mitsuba places the light: spheres of radius 1 at
-/// x = 0 and x = 4 span a box centred at x = 2 of half-diagonal sqrt(11).
+/// Shadow rays towards lights at infinity reach twice the larger of the scene's bounding radius
+/// and the point's distance from its centre, where Mitsuba places such lights: spheres of
+/// radius 1 at x = 0 and x = 4 span a box centred at x = 2 of half-diagonal sqrt(11).
 #[test]
-fn the_sun_is_twice_the_scenes_radius_away() {
+fn lights_at_infinity_are_twice_the_scenes_radius_away() {
     let s = crate::common::scene(
         "[camera]\norigin = [0, 0, 9]\ntarget = [0, 0, 0]\nfov = 40\nresolution = [8, 8]\n\
          [[shapes]]\ntype = \"sphere\"\n[[shapes]]\ntype = \"sphere\"\ncenter = [4, 0, 0]\n",
     );
     let radius = 11.0f32.sqrt();
     let centre = Vec3A::new(2.0, 0.0, 0.0);
-    assert!((s.sun_reach(centre) - 2.0 * radius).abs() < 1e-4, "{}", s.sun_reach(centre));
+    assert!((s.infinite_reach(centre) - 2.0 * radius).abs() < 1e-4, "{}", s.infinite_reach(centre));
     let inside = Vec3A::new(2.5, 0.5, 0.0);
-    assert!((s.sun_reach(inside) - 2.0 * radius).abs() < 1e-4);
+    assert!((s.infinite_reach(inside) - 2.0 * radius).abs() < 1e-4);
     let far = Vec3A::new(22.0, 0.0, 0.0);
-    assert!((s.sun_reach(far) - 40.0).abs() < 1e-4, "{}", s.sun_reach(far));
+    assert!((s.infinite_reach(far) - 40.0).abs() < 1e-4, "{}", s.infinite_reach(far));
 }

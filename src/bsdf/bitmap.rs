@@ -60,6 +60,14 @@ impl Bitmap {
         self.texels.iter().map(|t| t.max_element()).fold(0.0, f32::max)
     }
 
+    /// The least and greatest of the texels read as one number (`Texture::eval_1`).
+    pub fn range_1(&self) -> (f32, f32) {
+        self.texels
+            .iter()
+            .map(|&t| super::luminance_1(t))
+            .fold((f32::INFINITY, 0.0f32), |(lo, hi), v| (lo.min(v), hi.max(v)))
+    }
+
     /// The reflectance at texture coordinates `uv`.
     pub fn eval(&self, uv: Vec2) -> Spectrum {
         let p = uv * self.scale * Vec2::new(self.width as f32, self.height as f32);

@@ -3,7 +3,7 @@
 //! of refraction `eta + i k` per channel (Mitsuba's named materials, or given values; the
 //! default, Mitsuba's `none`, reflects everything). One-sided unless two-sided.
 
-use super::microfacet::Microfacet;
+use super::microfacet::{Microfacet, Roughness};
 use super::{BsdfSample, front_side, mirror};
 use crate::math::{Spectrum, reflect};
 use glam::{Vec2, Vec3A};
@@ -91,51 +91,59 @@ impl Conductor {
 }
 
 /// Mitsuba's `roughconductor`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RoughConductor {
     /// The metal.
     pub metal: Metal,
     /// Its micro-normals.
-    pub microfacet: Microfacet,
+    pub roughness: Roughness,
 }
 
 impl RoughConductor {
-    /// BSDF times |cos wi|.
-    pub fn eval(&self, wo: Vec3A, wi: Vec3A) -> Spectrum {
+    /// BSDF times |cos wi| at texture coordinates `uv`.
+    pub fn eval(&self, wo: Vec3A, wi: Vec3A, uv: Vec2) -> Spectrum {
+        self.eval_with(&self.roughness.at(uv), wo, wi)
+    }
+
+    fn eval_with(&self, mf: &Microfacet, wo: Vec3A, wi: Vec3A) -> Spectrum {
         let (wo, wi, _) = self.metal.front(wo, wi);
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return Spectrum::ZERO;
         }
         let h = (wo + wi).normalize();
-        let mf = &self.microfacet;
         self.metal.reflectance(wo.dot(h)) * (mf.d(h) * mf.g(wo, wi, h) / (4.0 * wo.z))
     }
 
     /// The density of [`Self::sample`] drawing `wi`.
-    pub fn pdf(&self, wo: Vec3A, wi: Vec3A) -> f32 {
-        let (wo, wi, _) = self.metal.front(wo, wi);
+    pub fn pdf(&self, wo: Vec3A, wi: Vec3A, uv: Vec2) -> f32 {
+        Self::pdf_with(&self.metal, &self.roughness.at(uv), wo, wi)
+    }
+
+    fn pdf_with(metal: &Metal, mf: &Microfacet, wo: Vec3A, wi: Vec3A) -> f32 {
+        let (wo, wi, _) = metal.front(wo, wi);
         if wo.z <= 0.0 || wi.z <= 0.0 {
             return 0.0;
         }
         let h = (wo + wi).normalize();
-        self.microfacet.d(h) * self.microfacet.g1(wo, h) / (4.0 * wo.z)
+        mf.d(h) * mf.g1(wo, h) / (4.0 * wo.z)
     }
 
     /// A visible micro-normal's mirror direction; `None` below the surface.
-    pub fn sample(&self, wo: Vec3A, u: Vec2) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3A, uv: Vec2, u: Vec2) -> Option<BsdfSample> {
         let (front, _, flipped) = self.metal.front(wo, wo);
         if front.z <= 0.0 {
             return None;
         }
-        let wi = reflect(front, self.microfacet.sample_visible(front, u));
+        let mf = self.roughness.at(uv);
+        let wi = reflect(front, mf.sample_visible(front, u));
         if wi.z <= 0.0 {
             return None;
         }
         let wi = if flipped { mirror(wi) } else { wi };
-        let pdf = self.pdf(wo, wi);
+        let pdf = Self::pdf_with(&self.metal, &mf, wo, wi);
         (pdf > 0.0).then(|| BsdfSample {
             wi,
-            weight: self.eval(wo, wi) / pdf,
+            weight: self.eval_with(&mf, wo, wi) / pdf,
             pdf,
             delta: false,
             eta: 1.0,
@@ -146,9 +154,9 @@ impl RoughConductor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::bsdf::Bsdf;
     use crate::bsdf::microfacet::MicrofacetKind::{Beckmann, Ggx};
     use crate::bsdf::testing::{agrees, check};
+    use crate::bsdf::{Bsdf, Texture};
     use glam::DVec3;
     use zerovar_testkit::SphereGrid;
 
@@ -185,9 +193,9 @@ mod tests {
 
     #[test]
     fn rough_conductor_is_mitsubas() {
-        let mf = |kind, alpha| Microfacet { kind, alpha };
+        let mf = |kind, alpha| Roughness::Constant(Microfacet::isotropic(kind, alpha));
         let zero = ([0.0; 3], 0.0);
-        let gold = RoughConductor { metal: metal("Au", Spectrum::ONE), microfacet: mf(Ggx, 0.2) };
+        let gold = RoughConductor { metal: metal("Au", Spectrum::ONE), roughness: mf(Ggx, 0.2) };
         let values = [
             ([0.741_401_2, 0.615_033_7, 0.249_368_65], 0.770_160_8),
             zero,
@@ -197,7 +205,7 @@ mod tests {
         ];
         agrees("gold ggx 0.2", Bsdf::RoughConductor(gold), values, 1e-4);
         let tint = Spectrum::new(0.9, 0.8, 0.7);
-        let copper = RoughConductor { metal: metal("Cu", tint), microfacet: mf(Beckmann, 0.1) };
+        let copper = RoughConductor { metal: metal("Cu", tint), roughness: mf(Beckmann, 0.1) };
         let values = [
             ([0.464_416_6, 0.268_749_6, 0.193_852_2], 0.542_127_25),
             zero,
@@ -210,36 +218,48 @@ mod tests {
     }
 
     /// Sampling against the density and the albedo two ways, front and back of a two-sided
-    /// metal (amorphous carbon, whose reflectance varies with the angle, so the weights do);
-    /// and a white furnace: a perfect mirror's (`none`) albedo is what masking leaves (near 1
-    /// for a smooth surface, far less for rough GGX), never above 1, and Mitsuba's.
+    /// metal (amorphous carbon, whose reflectance varies with the angle, so the weights do),
+    /// isotropic and brushed; and a white furnace: a perfect mirror's (`none`) albedo is what
+    /// masking leaves (near 1 for a smooth surface, far less for rough GGX), never above 1,
+    /// and Mitsuba's.
     #[test]
     fn rough_conductor_samples_its_density() {
         for kind in [Beckmann, Ggx] {
-            for alpha in [0.05, 0.4] {
-                let microfacet = Microfacet { kind, alpha };
+            for (alpha_u, alpha_v) in [(0.05, 0.05), (0.4, 0.4), (0.06, 0.5)] {
+                let microfacet = Microfacet { kind, alpha_u, alpha_v };
                 let carbon = Metal { two_sided: true, ..metal("a-C", Spectrum::ONE) };
-                let b = RoughConductor { metal: carbon, microfacet };
+                let b = RoughConductor { metal: carbon, roughness: microfacet.into() };
+                let kappa = (0.5 / f64::from(alpha_u.min(alpha_v))).powi(2);
+                // An elongated lobe varies fast in azimuth near its axis: finer bins there.
+                let (n_theta, n_phi) =
+                    if microfacet.is_anisotropic() { (64, 96) } else { (24, 16) };
+                let grid =
+                    |axis| SphereGrid { n_theta, n_phi, ..SphereGrid::for_lobe(axis, kappa) };
                 for wo in [
                     Vec3A::new(0.3, 0.1, 0.9).normalize(),
                     Vec3A::new(0.95, 0.0, 0.1).normalize(),
                     Vec3A::new(0.2, -0.1, -0.9).normalize(),
                 ] {
-                    let what = format!("roughconductor {kind:?} {alpha} from {wo}");
+                    let what = format!("roughconductor {microfacet:?} from {wo}");
                     let axis = Vec3A::new(-wo.x, -wo.y, wo.z).as_dvec3();
-                    let grid = SphereGrid::for_lobe(axis, (0.5 / f64::from(alpha)).powi(2));
                     check(
                         &what,
                         1.0,
-                        &|_, u2| b.sample(wo, u2),
-                        &|wi| b.pdf(wo, wi),
-                        &|wi| b.eval(wo, wi).x,
-                        grid,
+                        &|_, u2| b.sample(wo, Vec2::ZERO, u2),
+                        &|wi| b.pdf(wo, wi, Vec2::ZERO),
+                        &|wi| b.eval(wo, wi, Vec2::ZERO).x,
+                        grid(axis),
                     );
                 }
-                let grid = SphereGrid::for_lobe(DVec3::Z, (0.5 / f64::from(alpha)).powi(2));
-                let mirror = RoughConductor { metal: metal("none", Spectrum::ONE), microfacet };
-                let albedo = grid.integrate(&|d| f64::from(mirror.eval(Vec3A::Z, d.as_vec3a()).x));
+                if microfacet.is_anisotropic() {
+                    continue;
+                }
+                let alpha = alpha_u;
+                let grid = SphereGrid::for_lobe(DVec3::Z, kappa);
+                let mirror =
+                    RoughConductor { metal: metal("none", Spectrum::ONE), roughness: b.roughness };
+                let albedo = grid
+                    .integrate(&|d| f64::from(mirror.eval(Vec3A::Z, d.as_vec3a(), Vec2::ZERO).x));
                 // Mitsuba 3.9.1's mean sample weight at normal incidence (20000 samples).
                 let mitsuba = match (kind, alpha < 0.1) {
                     (_, true) => 0.998,
@@ -252,11 +272,43 @@ mod tests {
         }
         let one_sided = RoughConductor {
             metal: metal("none", Spectrum::ONE),
-            microfacet: Microfacet { kind: Ggx, alpha: 0.3 },
+            roughness: Microfacet::isotropic(Ggx, 0.3).into(),
         };
         let back = Vec3A::new(0.2, -0.1, -0.9).normalize();
-        assert!(one_sided.sample(back, Vec2::splat(0.4)).is_none());
-        assert_eq!(one_sided.eval(back, Vec3A::new(0.1, 0.0, -0.99)), Spectrum::ZERO);
+        assert!(one_sided.sample(back, Vec2::ZERO, Vec2::splat(0.4)).is_none());
+        assert_eq!(one_sided.eval(back, Vec3A::new(0.1, 0.0, -0.99), Vec2::ZERO), Spectrum::ZERO);
+    }
+
+    /// A textured roughness is the constant one of its value at each point: a checkerboard of
+    /// two roughnesses (Mitsuba's `eval_1` takes `color1` where the halves agree) samples,
+    /// weighs and evaluates in each square as the constant BSDF of that square's value.
+    #[test]
+    fn textured_roughness_is_the_constant_of_its_value_there() {
+        let checker = Texture::Checkerboard {
+            color0: Spectrum::splat(0.05),
+            color1: Spectrum::splat(0.4),
+            scale: Vec2::splat(2.0),
+        };
+        let map = RoughConductor {
+            metal: metal("Au", Spectrum::ONE),
+            roughness: Roughness::Textured {
+                kind: Ggx,
+                alpha_u: std::sync::Arc::new(checker),
+                alpha_v: None,
+            },
+        };
+        let wo = Vec3A::new(0.3, 0.1, 0.9).normalize();
+        for (uv, alpha) in [(Vec2::new(0.1, 0.1), 0.4), (Vec2::new(0.3, 0.1), 0.05)] {
+            let constant = RoughConductor {
+                roughness: Microfacet::isotropic(Ggx, alpha).into(),
+                ..map.clone()
+            };
+            let u = Vec2::new(0.3, 0.7);
+            let (a, b) = (map.sample(wo, uv, u).unwrap(), constant.sample(wo, uv, u).unwrap());
+            assert_eq!((a.wi, a.weight, a.pdf), (b.wi, b.weight, b.pdf), "{uv}");
+            assert_eq!(map.pdf(wo, a.wi, uv), constant.pdf(wo, a.wi, Vec2::ZERO));
+            assert_eq!(map.eval(wo, a.wi, uv), constant.eval(wo, a.wi, Vec2::ZERO));
+        }
     }
 
     #[test]

@@ -1,10 +1,13 @@
-//! Isotropic microfacet distributions, Beckmann and GGX as Mitsuba 3 defines them, with Smith's
-//! masking and exact sampling of the normals visible from a direction (Heitz and d'Eon 2014):
-//! GGX by projecting a disk onto the stretched hemisphere, Beckmann by inverting its slope
+//! Microfacet distributions, Beckmann and GGX as Mitsuba 3 defines them, isotropic or with a
+//! roughness of their own along the tangent (x) and bitangent (y), with Smith's masking and
+//! exact sampling of the normals visible from a direction (Heitz and d'Eon 2014): GGX by
+//! projecting a disk onto the stretched hemisphere, Beckmann by inverting its slope
 //! distribution numerically. Directions are local (z = the macro-surface normal).
 
+use super::Texture;
 use glam::{Vec2, Vec3A};
 use std::f64::consts::PI;
+use std::sync::Arc;
 
 /// Which distribution of micro-normals.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -15,13 +18,64 @@ pub enum MicrofacetKind {
     Ggx,
 }
 
-/// A distribution of micro-normals of roughness `alpha` (the slopes' scale).
+/// A distribution of micro-normals of roughness `alpha_u` along the tangent and `alpha_v`
+/// along the bitangent (the slopes' scales).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Microfacet {
     /// The shape of the distribution.
     pub kind: MicrofacetKind,
-    /// Roughness: Beckmann's RMS slope times sqrt 2, GGX's alpha.
-    pub alpha: f32,
+    /// Roughness along the tangent (x): Beckmann's RMS slope times sqrt 2, GGX's alpha.
+    pub alpha_u: f32,
+    /// Roughness along the bitangent (y).
+    pub alpha_v: f32,
+}
+
+/// A rough surface's roughness: constant, or read from textures at the point hit (Mitsuba's
+/// `alpha`, `alpha_u` and `alpha_v` given as textures, each read as one number by
+/// [`Texture::eval_1`]).
+#[derive(Clone, Debug, PartialEq)]
+pub enum Roughness {
+    /// The same distribution everywhere.
+    Constant(Microfacet),
+    /// A distribution that varies over the surface.
+    Textured {
+        /// The shape of the distribution.
+        kind: MicrofacetKind,
+        /// Roughness along the tangent.
+        alpha_u: Arc<Texture>,
+        /// Roughness along the bitangent; `None` where it is `alpha_u`'s.
+        alpha_v: Option<Arc<Texture>>,
+    },
+}
+
+impl From<Microfacet> for Roughness {
+    fn from(m: Microfacet) -> Self {
+        Roughness::Constant(m)
+    }
+}
+
+impl Roughness {
+    /// The distribution at texture coordinates `uv`.
+    #[inline]
+    pub fn at(&self, uv: Vec2) -> Microfacet {
+        match self {
+            Roughness::Constant(m) => *m,
+            Roughness::Textured { kind, alpha_u, alpha_v } => {
+                let u = alpha_u.eval_1(uv);
+                let v = alpha_v.as_ref().map_or(u, |t| t.eval_1(uv));
+                Microfacet { kind: *kind, alpha_u: u, alpha_v: v }
+            }
+        }
+    }
+
+    /// Whether the roughness may differ along the tangent and the bitangent, so that the
+    /// tangent's direction matters.
+    pub fn is_anisotropic(&self) -> bool {
+        match self {
+            Roughness::Constant(m) => m.is_anisotropic(),
+            Roughness::Textured { alpha_v, .. } => alpha_v.is_some(),
+        }
+    }
 }
 
 /// The smallest roughness accepted: below it a lobe is narrower than single precision
@@ -29,12 +83,27 @@ pub struct Microfacet {
 pub const MIN_ALPHA: f32 = 1e-4;
 
 impl Microfacet {
+    /// The same roughness `alpha` in every direction.
+    pub fn isotropic(kind: MicrofacetKind, alpha: f32) -> Self {
+        Self { kind, alpha_u: alpha, alpha_v: alpha }
+    }
+
+    /// Whether the roughness differs along the tangent and the bitangent, so that the
+    /// tangent's direction matters.
+    pub fn is_anisotropic(&self) -> bool {
+        self.alpha_u != self.alpha_v
+    }
+
     /// The density of micro-normals per unit projected area, D(m).
     pub fn d(&self, m: Vec3A) -> f32 {
         if m.z <= 0.0 {
             return 0.0;
         }
-        let (a2, c2) = (self.alpha * self.alpha, m.z * m.z);
+        if self.is_anisotropic() {
+            return self.d_anisotropic(m);
+        }
+        let alpha = self.alpha_u;
+        let (a2, c2) = (alpha * alpha, m.z * m.z);
         let s2 = m.x * m.x + m.y * m.y;
         let d = match self.kind {
             MicrofacetKind::Beckmann => {
@@ -48,13 +117,36 @@ impl Microfacet {
         if d.is_finite() && d * m.z > 1e-20 { d } else { 0.0 }
     }
 
+    /// [`Self::d`] with two roughnesses: the squared slope is scaled per axis.
+    fn d_anisotropic(&self, m: Vec3A) -> f32 {
+        let (au, av, c2) = (self.alpha_u, self.alpha_v, m.z * m.z);
+        let e = (m.x / au).powi(2) + (m.y / av).powi(2);
+        let d = match self.kind {
+            MicrofacetKind::Beckmann => {
+                (-e / c2).exp() / (std::f32::consts::PI * au * av * c2 * c2)
+            }
+            MicrofacetKind::Ggx => {
+                let t = e + c2;
+                1.0 / (std::f32::consts::PI * au * av * t * t)
+            }
+        };
+        if d.is_finite() && d * m.z > 1e-20 { d } else { 0.0 }
+    }
+
     /// Smith's Lambda of direction `v`: the masked share of micro-area over the visible one.
     fn lambda(&self, v: Vec3A) -> f64 {
         let s2 = f64::from(v.x * v.x + v.y * v.y);
         if s2 == 0.0 {
             return 0.0;
         }
-        let a2_tan2 = f64::from(self.alpha).powi(2) * s2 / f64::from(v.z).powi(2);
+        // The roughness seen along v's azimuth, squared, times tan^2.
+        let a2_tan2 = if self.is_anisotropic() {
+            let (au, av) = (f64::from(self.alpha_u), f64::from(self.alpha_v));
+            (au * au * f64::from(v.x).powi(2) + av * av * f64::from(v.y).powi(2))
+                / f64::from(v.z).powi(2)
+        } else {
+            f64::from(self.alpha_u).powi(2) * s2 / f64::from(v.z).powi(2)
+        };
         match self.kind {
             MicrofacetKind::Ggx => 0.5 * ((1.0 + a2_tan2).sqrt() - 1.0),
             MicrofacetKind::Beckmann => {
@@ -126,12 +218,12 @@ impl Microfacet {
 
     /// `v` in the configuration where the roughness is 1.
     fn stretch(&self, v: Vec3A) -> Vec3A {
-        Vec3A::new(self.alpha * v.x, self.alpha * v.y, v.z).normalize()
+        Vec3A::new(self.alpha_u * v.x, self.alpha_v * v.y, v.z).normalize()
     }
 
     /// A normal of the roughness-1 configuration back in this one.
     fn unstretch(&self, m: Vec3A) -> Vec3A {
-        Vec3A::new(self.alpha * m.x, self.alpha * m.y, m.z.max(1e-7)).normalize()
+        Vec3A::new(self.alpha_u * m.x, self.alpha_v * m.y, m.z.max(1e-7)).normalize()
     }
 }
 
@@ -276,10 +368,33 @@ mod tests {
         let mut out = Vec::new();
         for kind in [MicrofacetKind::Beckmann, MicrofacetKind::Ggx] {
             for alpha in [0.05, 0.3, 1.0] {
-                out.push(Microfacet { kind, alpha });
+                out.push(Microfacet::isotropic(kind, alpha));
             }
+            // Brushed along either axis.
+            out.push(Microfacet { kind, alpha_u: 0.05, alpha_v: 0.4 });
+            out.push(Microfacet { kind, alpha_u: 0.7, alpha_v: 0.1 });
         }
         out
+    }
+
+    /// The concentration of a lobe as narrow as `mf`'s narrowest direction.
+    fn kappa(mf: &Microfacet) -> f64 {
+        2.0 / f64::from(mf.alpha_u.min(mf.alpha_v)).powi(2)
+    }
+
+    /// A grid on which `mf`'s densities integrate to within 1e-3: an elongated lobe seen
+    /// from a grazing direction has its edge (where normals stop being visible) far out along
+    /// its long axis, which takes finer bins over the whole hemisphere to integrate.
+    fn integration_grid(mf: &Microfacet) -> zerovar_testkit::SphereGrid {
+        if !mf.is_anisotropic() {
+            return fine_grid(kappa(mf));
+        }
+        zerovar_testkit::SphereGrid {
+            axis: DVec3::Z,
+            theta_scale: f64::from(mf.alpha_u.max(mf.alpha_v)) / 4.0,
+            n_theta: 256,
+            n_phi: 256,
+        }
     }
 
     /// A grid graded towards the normal, fine enough in azimuth to follow the edge where
@@ -312,7 +427,7 @@ mod tests {
     #[test]
     fn micro_area_projects_to_macro_area() {
         for mf in distributions() {
-            let grid = fine_grid(2.0 / f64::from(mf.alpha).powi(2));
+            let grid = integration_grid(&mf);
             let area = grid.integrate(&|m| f64::from(mf.d(m.as_vec3a())) * m.z.max(0.0));
             assert!((area - 1.0).abs() < 1e-3, "{mf:?}: {area}");
             for cos in [1.0, 0.7, 0.2, 0.02] {
@@ -328,7 +443,7 @@ mod tests {
     #[test]
     fn visible_normals_follow_their_density() {
         for mf in distributions() {
-            let kappa = 2.0 / f64::from(mf.alpha).powi(2);
+            let kappa = kappa(&mf);
             for v in [
                 Vec3A::new(0.0, 0.0, 1.0),
                 Vec3A::new(0.6, 0.0, 0.8),
@@ -355,7 +470,16 @@ mod tests {
             (MicrofacetKind::Beckmann, 2.008_003, 0.998_019_7),
             (MicrofacetKind::Ggx, 1.402_768, 0.894_081_8),
         ] {
-            let mf = Microfacet { kind, alpha: 0.3 };
+            let mf = Microfacet::isotropic(kind, 0.3);
+            assert!((mf.d(m) / d - 1.0).abs() < 1e-5, "{kind:?} D {} vs {d}", mf.d(m));
+            assert!((mf.g1(v, m) / g1 - 1.0).abs() < 4e-3, "{kind:?} G1 {} vs {g1}", mf.g1(v, m));
+        }
+        // Anisotropic, alpha_u 0.1 and alpha_v 0.45.
+        for (kind, d, g1) in [
+            (MicrofacetKind::Beckmann, 0.053_767_875, 1.0),
+            (MicrofacetKind::Ggx, 0.221_550_29, 0.966_282_96),
+        ] {
+            let mf = Microfacet { kind, alpha_u: 0.1, alpha_v: 0.45 };
             assert!((mf.d(m) / d - 1.0).abs() < 1e-5, "{kind:?} D {} vs {d}", mf.d(m));
             assert!((mf.g1(v, m) / g1 - 1.0).abs() < 4e-3, "{kind:?} G1 {} vs {g1}", mf.g1(v, m));
         }

@@ -21,7 +21,7 @@ mod testing;
 
 pub use bitmap::{Bitmap, Wrap, srgb_to_linear};
 pub use conductor::{Conductor, Metal, RoughConductor};
-pub use microfacet::{MIN_ALPHA, Microfacet, MicrofacetKind};
+pub use microfacet::{MIN_ALPHA, Microfacet, MicrofacetKind, Roughness};
 pub use rough::{RoughDielectric, RoughPlastic};
 
 use crate::math::{Spectrum, cosine_hemisphere};
@@ -57,6 +57,34 @@ impl Texture {
         }
     }
 
+    /// The value at `uv` as one number, as Mitsuba's `eval_1` reads a texture given for a
+    /// roughness or an opacity: the luminance, with (Mitsuba's own convention there) a
+    /// checkerboard's two values the other way round from [`Self::eval`].
+    #[inline]
+    pub fn eval_1(&self, uv: Vec2) -> f32 {
+        match *self {
+            Texture::Constant(c) => luminance_1(c),
+            Texture::Checkerboard { color0, color1, scale } => {
+                let p = (uv * scale).fract_gl();
+                luminance_1(if (p.x > 0.5) == (p.y > 0.5) { color1 } else { color0 })
+            }
+            Texture::Bitmap(ref b) => luminance_1(b.eval(uv)),
+        }
+    }
+
+    /// The least and the greatest value [`Self::eval_1`] takes anywhere.
+    pub fn range_1(&self) -> (f32, f32) {
+        match *self {
+            Texture::Constant(c) => (luminance_1(c), luminance_1(c)),
+            Texture::Checkerboard { color0, color1, .. } => {
+                let (a, b) = (luminance_1(color0), luminance_1(color1));
+                (a.min(b), a.max(b))
+            }
+            // Bilinear weights are convex: lookups stay within the texels' range.
+            Texture::Bitmap(ref b) => b.range_1(),
+        }
+    }
+
     /// The value at texture coordinates `uv`.
     #[inline]
     pub fn eval(&self, uv: Vec2) -> Spectrum {
@@ -69,6 +97,13 @@ impl Texture {
             Texture::Bitmap(ref b) => b.eval(uv),
         }
     }
+}
+
+/// A colour as one number: the value itself where the channels agree (so that a number given
+/// for a roughness is used exactly), else the luminance.
+#[inline]
+fn luminance_1(c: Spectrum) -> f32 {
+    if c.x == c.y && c.y == c.z { c.x } else { crate::math::luminance(c) }
 }
 
 /// A surface's scattering model.
@@ -112,8 +147,9 @@ pub enum Bsdf {
     /// Where the path scatters, it has already been decided that it does, so the nested
     /// BSDF's own values and densities apply there.
     Mask {
-        /// The share of light that meets the nested BSDF.
-        opacity: f32,
+        /// The share of light that meets the nested BSDF, read as one number
+        /// ([`Texture::eval_1`]).
+        opacity: Texture,
         /// What it meets.
         nested: Box<Bsdf>,
     },
@@ -245,13 +281,38 @@ impl Bsdf {
     /// `1 - R'` for a thin dielectric, `None` for a surface nothing passes straight through.
     /// Paths and shadow rays cross it as they cross a null surface, without a scattering
     /// event (Mitsuba neither counts its depth nor blocks next-event estimation there).
+    /// A textured mask's share is read at texture coordinates `uv`.
     #[inline]
-    pub fn null_transmission(&self, cos: f32) -> Option<f32> {
+    pub fn null_transmission(&self, cos: f32, uv: Vec2) -> Option<f32> {
         match *self {
             Bsdf::Null => Some(1.0),
             Bsdf::ThinDielectric { eta } => Some(1.0 - thin_reflectance(cos, eta)),
-            Bsdf::Mask { opacity, .. } => Some(1.0 - opacity),
+            Bsdf::Mask { ref opacity, .. } => Some(1.0 - opacity.eval_1(uv)),
             _ => None,
+        }
+    }
+
+    /// Whether light passes straight through anywhere on the surface (a null surface, a thin
+    /// dielectric or a mask), so that a shadow ray must look at the crossing.
+    #[inline]
+    pub fn may_pass(&self) -> bool {
+        matches!(self, Bsdf::Null | Bsdf::ThinDielectric { .. } | Bsdf::Mask { .. })
+    }
+
+    /// Whether the share passing depends on where the surface is hit (a textured mask).
+    #[inline]
+    pub fn passes_by_texture(&self) -> bool {
+        matches!(self, Bsdf::Mask { opacity, .. } if !matches!(opacity, Texture::Constant(_)))
+    }
+
+    /// Whether the BSDF depends on the direction of the tangent about the normal (a brushed
+    /// rough surface), so that its frame must follow the surface's parameterization.
+    pub fn is_anisotropic(&self) -> bool {
+        match self {
+            Bsdf::RoughConductor(r) => r.roughness.is_anisotropic(),
+            Bsdf::RoughDielectric(r) => r.roughness.is_anisotropic(),
+            Bsdf::Mask { nested, .. } => nested.is_anisotropic(),
+            _ => false,
         }
     }
 
@@ -301,8 +362,8 @@ impl Bsdf {
                 let (f_o, f_i) = (fresnel(wo.z, p.eta).0, fresnel(wi.z, p.eta).0);
                 p.diffuse_value(uv, f_o, f_i) * wi.z
             }
-            Bsdf::RoughDielectric(r) => Spectrum::splat(r.eval(wo, wi)),
-            Bsdf::RoughConductor(r) => r.eval(wo, wi),
+            Bsdf::RoughDielectric(ref r) => Spectrum::splat(r.eval(wo, wi, uv)),
+            Bsdf::RoughConductor(ref r) => r.eval(wo, wi, uv),
             Bsdf::Mask { ref nested, .. } => nested.eval(wo, wi, uv),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
@@ -312,9 +373,9 @@ impl Bsdf {
         }
     }
 
-    /// Density of sampling `wi` (zero for delta components).
+    /// Density of sampling `wi` at texture coordinates `uv` (zero for delta components).
     #[inline]
-    pub fn pdf(&self, wo: Vec3A, wi: Vec3A) -> f32 {
+    pub fn pdf(&self, wo: Vec3A, wi: Vec3A, uv: Vec2) -> f32 {
         match *self {
             Bsdf::Diffuse { two_sided, .. } => {
                 let (wo_z, wi_z) =
@@ -328,9 +389,9 @@ impl Bsdf {
                 }
                 (1.0 - p.specular_probability(fresnel(wo.z, p.eta).0)) * FRAC_1_PI * wi.z
             }
-            Bsdf::RoughDielectric(r) => r.pdf(wo, wi),
-            Bsdf::RoughConductor(r) => r.pdf(wo, wi),
-            Bsdf::Mask { ref nested, .. } => nested.pdf(wo, wi),
+            Bsdf::RoughDielectric(ref r) => r.pdf(wo, wi, uv),
+            Bsdf::RoughConductor(ref r) => r.pdf(wo, wi, uv),
+            Bsdf::Mask { ref nested, .. } => nested.pdf(wo, wi, uv),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, wi, _) = p.front(wo, wi);
                 p.pdf(wo, wi)
@@ -367,9 +428,9 @@ impl Bsdf {
                 let (wo, _, flipped) = p.front(wo, wo);
                 Some(from_front(sample_plastic(p, wo, uv, u1, u2)?, flipped))
             }
-            Bsdf::RoughDielectric(r) => r.sample(wo, u1, u2),
+            Bsdf::RoughDielectric(ref r) => r.sample(wo, uv, u1, u2),
             Bsdf::Conductor(c) => c.sample(wo),
-            Bsdf::RoughConductor(r) => r.sample(wo, u2),
+            Bsdf::RoughConductor(ref r) => r.sample(wo, uv, u2),
             Bsdf::Mask { ref nested, .. } => nested.sample(wo, uv, u1, u2),
             Bsdf::RoughPlastic(ref p) => {
                 let (wo, _, flipped) = p.front(wo, wo);
@@ -470,14 +531,15 @@ mod tests {
             .map(|_| {
                 let bs = b.sample(wo, Vec2::ZERO, 0.5, s.next_2d()).unwrap();
                 // The weight is f cos / pdf = the albedo for a Lambertian surface.
-                let e = b.eval(wo, bs.wi, Vec2::ZERO).x / b.pdf(wo, bs.wi);
+                let e = b.eval(wo, bs.wi, Vec2::ZERO).x / b.pdf(wo, bs.wi, Vec2::ZERO);
                 assert!((e - 0.7).abs() < 1e-5 && (bs.weight.x - 0.7).abs() < 1e-6);
                 bs.wi.as_dvec3()
             })
             .collect();
         let grid = zerovar_testkit::SphereGrid::uniform(glam::DVec3::Z);
-        grid.chi2(&dirs, &|d| b.pdf(wo, d.as_vec3a()) as f64).assert_pass(1e-3, "cosine sampling");
-        let total = grid.integrate(&|d| b.pdf(wo, d.as_vec3a()) as f64);
+        grid.chi2(&dirs, &|d| b.pdf(wo, d.as_vec3a(), Vec2::ZERO) as f64)
+            .assert_pass(1e-3, "cosine sampling");
+        let total = grid.integrate(&|d| b.pdf(wo, d.as_vec3a(), Vec2::ZERO) as f64);
         assert!((total - 1.0).abs() < 1e-3, "diffuse pdf integrates to {total}");
         assert!(b.sample(-wo, Vec2::ZERO, 0.5, Vec2::splat(0.3)).is_none());
         let two = Bsdf::Diffuse { reflectance: Texture::Constant(Spectrum::ONE), two_sided: true };
@@ -576,7 +638,7 @@ mod tests {
                     assert_eq!(bs.wi, Vec3A::new(-wo.x, -wo.y, wo.z));
                     assert!((bs.pdf - specular).abs() < 1e-7);
                 } else {
-                    let (f, pdf) = (b.eval(wo, bs.wi, Vec2::ZERO), b.pdf(wo, bs.wi));
+                    let (f, pdf) = (b.eval(wo, bs.wi, Vec2::ZERO), b.pdf(wo, bs.wi, Vec2::ZERO));
                     assert!((bs.pdf - pdf).abs() <= 1e-6 * pdf);
                     assert!((bs.weight.x - f.x / pdf).abs() <= 1e-4 * bs.weight.x);
                     dirs.push(bs.wi.as_dvec3());
@@ -586,9 +648,9 @@ mod tests {
             let share = f64::from(spec_hits) / f64::from(n);
             assert!((share - f64::from(specular)).abs() < 5.0 * sigma, "{share} vs {specular}");
             let diffuse = 1.0 - f64::from(specular);
-            let conditional = |d: glam::DVec3| b.pdf(wo, d.as_vec3a()) as f64 / diffuse;
+            let conditional = |d: glam::DVec3| b.pdf(wo, d.as_vec3a(), Vec2::ZERO) as f64 / diffuse;
             grid.chi2(&dirs, &conditional).assert_pass(1e-3, "plastic's diffuse lobe");
-            let total = grid.integrate(&|d| b.pdf(wo, d.as_vec3a()) as f64);
+            let total = grid.integrate(&|d| b.pdf(wo, d.as_vec3a(), Vec2::ZERO) as f64);
             assert!((total - diffuse).abs() < 1e-3 * diffuse, "pdf integrates to {total}");
             // The albedo two ways: the mean weight, and Fresnel reflection plus the diffuse
             // lobe's integral.
@@ -615,7 +677,7 @@ mod tests {
             );
             let wi = mirror(front.wi);
             assert_eq!(two.eval(back, wi, Vec2::ZERO), b.eval(r, front.wi, Vec2::ZERO));
-            assert_eq!(two.pdf(back, wi), b.pdf(r, front.wi));
+            assert_eq!(two.pdf(back, wi, Vec2::ZERO), b.pdf(r, front.wi, Vec2::ZERO));
         }
     }
 
@@ -627,13 +689,26 @@ mod tests {
             reflectance: Texture::Constant(Spectrum::splat(0.6)),
             two_sided: false,
         };
-        let m = Bsdf::Mask { opacity: 0.3, nested: Box::new(nested.clone()) };
-        assert_eq!(m.null_transmission(0.2), Some(0.7));
+        let opacity = Texture::Constant(Spectrum::splat(0.3));
+        let m = Bsdf::Mask { opacity, nested: Box::new(nested.clone()) };
+        assert_eq!(m.null_transmission(0.2, Vec2::ZERO), Some(0.7));
+        assert!(m.may_pass() && !m.passes_by_texture());
+        // A checkerboard opacity (Mitsuba's `eval_1`: `color1` where the halves agree).
+        let checker = Texture::Checkerboard {
+            color0: Spectrum::splat(0.9),
+            color1: Spectrum::new(0.1, 0.2, 0.3),
+            scale: Vec2::ONE,
+        };
+        let textured = Bsdf::Mask { opacity: checker, nested: Box::new(nested.clone()) };
+        assert!(textured.passes_by_texture());
+        let agree = 1.0 - crate::math::luminance(Spectrum::new(0.1, 0.2, 0.3));
+        assert_eq!(textured.null_transmission(1.0, Vec2::new(0.2, 0.3)), Some(agree));
+        assert!((textured.null_transmission(1.0, Vec2::new(0.7, 0.3)).unwrap() - 0.1).abs() < 1e-6);
         assert!(m.has_smooth_component() && m.guides());
         let (wo, wi) =
             (Vec3A::new(0.3, 0.1, 0.9).normalize(), Vec3A::new(-0.2, 0.4, 0.8).normalize());
         assert_eq!(m.eval(wo, wi, Vec2::ZERO), nested.eval(wo, wi, Vec2::ZERO));
-        assert_eq!(m.pdf(wo, wi), nested.pdf(wo, wi));
+        assert_eq!(m.pdf(wo, wi, Vec2::ZERO), nested.pdf(wo, wi, Vec2::ZERO));
         let (a, b) = (
             m.sample(wo, Vec2::ZERO, 0.4, Vec2::splat(0.3)),
             nested.sample(wo, Vec2::ZERO, 0.4, Vec2::splat(0.3)),

@@ -7,7 +7,7 @@
 //! weight is the BSDF over the full density of its direction, so that next-event estimation
 //! and guiding, which evaluate both, see the same numbers.
 
-use super::microfacet::{Microfacet, directional_albedo};
+use super::microfacet::{Microfacet, Roughness, directional_albedo};
 use super::{
     BsdfSample, Texture, fresnel, front_side, refract, specular_sampling_weight, specular_share,
     under_coating,
@@ -17,10 +17,10 @@ use glam::{Vec2, Vec3A};
 use std::f32::consts::FRAC_1_PI;
 
 /// Mitsuba's `roughdielectric`.
-#[derive(Clone, Copy, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct RoughDielectric {
     /// The boundary's micro-normals.
-    pub microfacet: Microfacet,
+    pub roughness: Roughness,
     /// Interior over exterior index of refraction.
     pub eta: f32,
 }
@@ -50,11 +50,14 @@ impl RoughDielectric {
         })
     }
 
-    /// BSDF times |cos wi|, with radiance scaled by 1/eta^2 when it refracts (Mitsuba's
-    /// radiance transport).
-    pub fn eval(&self, wo: Vec3A, wi: Vec3A) -> f32 {
+    /// BSDF times |cos wi| at texture coordinates `uv`, with radiance scaled by 1/eta^2 when
+    /// it refracts (Mitsuba's radiance transport).
+    pub fn eval(&self, wo: Vec3A, wi: Vec3A, uv: Vec2) -> f32 {
+        self.eval_with(&self.roughness.at(uv), wo, wi)
+    }
+
+    fn eval_with(&self, mf: &Microfacet, wo: Vec3A, wi: Vec3A) -> f32 {
         let Some(Half { m, reflect, eta }) = self.half(wo, wi) else { return 0.0 };
-        let mf = &self.microfacet;
         let (d, g) = (mf.d(m), mf.g(wo, wi, m));
         let f = fresnel(wo.dot(m), self.eta).0;
         if reflect {
@@ -67,7 +70,11 @@ impl RoughDielectric {
     }
 
     /// The density of [`Self::sample`] drawing `wi`.
-    pub fn pdf(&self, wo: Vec3A, wi: Vec3A) -> f32 {
+    pub fn pdf(&self, wo: Vec3A, wi: Vec3A, uv: Vec2) -> f32 {
+        self.pdf_with(&self.roughness.at(uv), wo, wi)
+    }
+
+    fn pdf_with(&self, mf: &Microfacet, wo: Vec3A, wi: Vec3A) -> f32 {
         let Some(Half { m, reflect, eta }) = self.half(wo, wi) else { return 0.0 };
         let v = if wo.z > 0.0 { wo } else { -wo };
         let f = fresnel(wo.dot(m), self.eta).0;
@@ -78,25 +85,26 @@ impl RoughDielectric {
             let denom = wo.dot(m) + eta * im;
             eta * eta * im.abs() / (denom * denom)
         };
-        self.microfacet.visible_pdf(v, m) * if reflect { f } else { 1.0 - f } * jacobian
+        mf.visible_pdf(v, m) * if reflect { f } else { 1.0 - f } * jacobian
     }
 
     /// A micro-normal visible from `wo`, then reflection with the Fresnel probability or
     /// refraction; `None` where the new direction leaves on the side its lobe cannot reach.
-    pub fn sample(&self, wo: Vec3A, u1: f32, u2: Vec2) -> Option<BsdfSample> {
+    pub fn sample(&self, wo: Vec3A, uv: Vec2, u1: f32, u2: Vec2) -> Option<BsdfSample> {
         if wo.z == 0.0 {
             return None;
         }
+        let mf = self.roughness.at(uv);
         let v = if wo.z > 0.0 { wo } else { -wo };
-        let m = self.microfacet.sample_visible(v, u2);
+        let m = mf.sample_visible(v, u2);
         let (f, cos_t, eta_it) = fresnel(wo.dot(m), self.eta);
         let reflected = u1 < f;
         let wi = if reflected { reflect(wo, m) } else { refract(wo, m, cos_t, eta_it) };
         if (wi.z * wo.z > 0.0) != reflected {
             return None;
         }
-        let pdf = self.pdf(wo, wi);
-        let value = self.eval(wo, wi);
+        let pdf = self.pdf_with(&mf, wo, wi);
+        let value = self.eval_with(&mf, wo, wi);
         (pdf > 0.0 && value.is_finite()).then(|| BsdfSample {
             wi,
             weight: Spectrum::splat(value / pdf),
@@ -251,14 +259,17 @@ mod tests {
     #[test]
     fn rough_dielectric_samples_its_density_and_conserves_energy() {
         for kind in kinds() {
-            for (alpha, eta) in [(0.1, 1.5), (0.4, 1.33), (0.8, 1.5)] {
-                let b = RoughDielectric { microfacet: Microfacet { kind, alpha }, eta };
+            for (alpha_u, alpha_v, eta) in
+                [(0.1, 0.1, 1.5), (0.4, 0.4, 1.33), (0.8, 0.8, 1.5), (0.1, 0.5, 1.5)]
+            {
+                let microfacet = Microfacet { kind, alpha_u, alpha_v };
+                let b = RoughDielectric { roughness: microfacet.into(), eta };
                 for wo in [
                     Vec3A::new(0.3, 0.1, 0.9).normalize(),
                     Vec3A::new(0.9, 0.0, 0.15).normalize(),
                     Vec3A::new(0.2, -0.3, -0.8).normalize(),
                 ] {
-                    let what = format!("roughdielectric {kind:?} {alpha} eta {eta} from {wo}");
+                    let what = format!("roughdielectric {microfacet:?} eta {eta} from {wo}");
                     // One-degree bins about the normal: both lobes resolved, and the horizon,
                     // where reflection's density gives way to transmission's, on a bin edge.
                     let grid = SphereGrid {
@@ -271,9 +282,9 @@ mod tests {
                     check(
                         &what,
                         most,
-                        &|u1, u2| b.sample(wo, u1, u2),
-                        &|wi| b.pdf(wo, wi),
-                        &|wi| b.eval(wo, wi),
+                        &|u1, u2| b.sample(wo, Vec2::ZERO, u1, u2),
+                        &|wi| b.pdf(wo, wi, Vec2::ZERO),
+                        &|wi| b.eval(wo, wi, Vec2::ZERO),
                         grid,
                     );
                 }
@@ -287,17 +298,18 @@ mod tests {
     #[test]
     fn rough_dielectric_transmission_scales_as_radiance() {
         let b = RoughDielectric {
-            microfacet: Microfacet { kind: MicrofacetKind::Ggx, alpha: 0.3 },
+            roughness: Microfacet::isotropic(MicrofacetKind::Ggx, 0.3).into(),
             eta: 1.5,
         };
         let (a, c) =
             (Vec3A::new(0.3, 0.2, 0.9).normalize(), Vec3A::new(-0.2, 0.1, -0.95).normalize());
-        let outside = b.eval(a, c) / c.z.abs();
-        let inside = b.eval(c, a) / a.z.abs();
+        let z = Vec2::ZERO;
+        let outside = b.eval(a, c, z) / c.z.abs();
+        let inside = b.eval(c, a, z) / a.z.abs();
         assert!((inside / outside - 1.5 * 1.5).abs() < 1e-3 * 2.25, "{inside} vs {outside}");
         // Reflection is symmetric.
         let r = Vec3A::new(-0.5, 0.1, 0.8).normalize();
-        assert!((b.eval(a, r) / r.z - b.eval(r, a) / a.z).abs() < 1e-5);
+        assert!((b.eval(a, r, z) / r.z - b.eval(r, a, z) / a.z).abs() < 1e-5);
     }
 
     #[test]
@@ -309,7 +321,7 @@ mod tests {
                     Spectrum::ONE,
                     1.49 / 1.000_277,
                     false,
-                    Microfacet { kind, alpha },
+                    Microfacet::isotropic(kind, alpha),
                 );
                 for wo in
                     [Vec3A::new(0.3, 0.1, 0.9).normalize(), Vec3A::new(0.95, 0.0, 0.1).normalize()]
@@ -342,7 +354,7 @@ mod mitsuba {
     fn rough_dielectric_is_mitsubas() {
         let b = |kind| {
             Bsdf::RoughDielectric(RoughDielectric {
-                microfacet: Microfacet { kind, alpha: 0.3 },
+                roughness: Microfacet::isotropic(kind, 0.3).into(),
                 eta: 1.5,
             })
         };
@@ -369,7 +381,7 @@ mod mitsuba {
     fn rough_plastic_is_mitsubas() {
         let diffuse = Texture::Constant(Spectrum::new(0.8, 0.5, 0.2));
         let b = |kind, alpha, nonlinear| {
-            let mf = Microfacet { kind, alpha };
+            let mf = Microfacet::isotropic(kind, alpha);
             Bsdf::RoughPlastic(RoughPlastic::new(
                 diffuse.clone(),
                 Spectrum::ONE,

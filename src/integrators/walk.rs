@@ -622,7 +622,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
     /// passes (Mitsuba's null component), its weight unchanged since that share is the
     /// probability. Otherwise the surface scatters (a thin dielectric then reflects).
     fn passes_straight(&mut self, s: &PathState, hit: &SurfaceHit) -> bool {
-        match self.scene.null_transmission(hit.shape, s.ray.direction.dot(hit.ng)) {
+        match self.scene.null_transmission(hit.shape, s.ray.direction.dot(hit.ng), || hit.uv) {
             Some(p) if p >= 1.0 => true,
             Some(p) => self.sampler.next_1d() < p,
             None => false,
@@ -799,8 +799,9 @@ struct SurfacePoint<'a> {
 
 impl<'a> SurfacePoint<'a> {
     fn new(scene: &'a Scene, hit: &SurfaceHit, ray_dir: Vec3A) -> Self {
-        let frame = Frame::from_z(hit.ns);
         let bsdf = &scene.surfaces[hit.shape as usize].bsdf;
+        let frame =
+            if bsdf.is_anisotropic() { scene.tangent_frame(hit) } else { Frame::from_z(hit.ns) };
         SurfacePoint { bsdf, frame, wo: frame.to_local(-ray_dir), uv: hit.uv }
     }
 
@@ -811,7 +812,7 @@ impl<'a> SurfacePoint<'a> {
 
     /// The BSDF sampling density of the world direction `wi`.
     fn pdf(&self, wi: Vec3A) -> f32 {
-        self.bsdf.pdf(self.wo, self.frame.to_local(wi))
+        self.bsdf.pdf(self.wo, self.frame.to_local(wi), self.uv)
     }
 }
 
@@ -1096,7 +1097,7 @@ fn sample_light(
             let length = to.length();
             (to / length, length * (1.0 - 1e-4))
         }
-        Light::Directional { .. } if ls.delta => (ls.wi, scene.sun_reach(p)),
+        l if l.is_infinite() => (ls.wi, scene.infinite_reach(p)),
         _ => (ls.wi, ls.distance),
     };
     let tr = shadow_transmittance(scene, Ray::new(origin, dir), reach, medium, sampler, counters);
@@ -1232,7 +1233,7 @@ fn shadow_steps(
             return Spectrum::ZERO;
         }
         let Some(hit) = hit else { return tr };
-        match scene.null_transmission(hit.shape, ray.direction.dot(hit.ng)) {
+        match scene.null_transmission(hit.shape, ray.direction.dot(hit.ng), || hit.uv) {
             Some(passes) => tr *= passes,
             None => return Spectrum::ZERO,
         }
@@ -1398,8 +1399,9 @@ radiance = 1
                     &mut sampler,
                     &mut Counters::default(),
                 );
-                let expected =
-                    crate::bsdf::Bsdf::ThinDielectric { eta: 1.5 }.null_transmission(cos).unwrap();
+                let expected = crate::bsdf::Bsdf::ThinDielectric { eta: 1.5 }
+                    .null_transmission(cos, Vec2::ZERO)
+                    .unwrap();
                 assert!(
                     (tr.x - expected).abs() < 1e-6,
                     "cos {cos}, side {side}: {tr:?} against {expected}"
@@ -1407,7 +1409,9 @@ radiance = 1
             }
         }
         // At normal incidence 1 - R' = 12/13 (R' = 1/13 for eta 1.5).
-        let normal = crate::bsdf::Bsdf::ThinDielectric { eta: 1.5 }.null_transmission(1.0).unwrap();
+        let normal = crate::bsdf::Bsdf::ThinDielectric { eta: 1.5 }
+            .null_transmission(1.0, Vec2::ZERO)
+            .unwrap();
         assert!((normal - 12.0 / 13.0).abs() < 1e-6);
         let opaque = text
             .replace("type = \"thindielectric\", int_ior = 1.5, ext_ior = 1", "type = \"diffuse\"");

@@ -6,7 +6,7 @@ use super::{RenderSettings, Scene, SceneError, Sources, Surface};
 use crate::accel::Bvh;
 use crate::bsdf::{
     Bitmap, Bsdf, Conductor, MIN_ALPHA, Metal, Microfacet, MicrofacetKind, Plastic, RoughConductor,
-    RoughDielectric, RoughPlastic, Texture, Wrap, srgb_to_linear,
+    RoughDielectric, RoughPlastic, Roughness, Texture, Wrap, srgb_to_linear,
 };
 use crate::camera::Camera;
 use crate::filter::{FilterTable, PixelFilter};
@@ -159,7 +159,10 @@ impl Ctx<'_> {
                 .err(format!("{what} {v:?} has a negative channel; colours are non-negative"));
         }
         if let Some(m) = max.filter(|m| v.iter().any(|x| x > m)) {
-            return self.err(format!("{what} {v:?} exceeds {m}; an albedo lies in [0, 1]"));
+            let v =
+                if v[0] == v[1] && v[1] == v[2] { format!("{}", v[0]) } else { format!("{v:?}") };
+            return self
+                .err(format!("{what} {v} exceeds {m}: it is a share of light, in [0, {m}]"));
         }
         Ok(Spectrum::from_array(v))
     }
@@ -342,7 +345,7 @@ pub(super) fn build(path: &Path, sources: &Sources, desc: SceneDesc) -> Result<S
 
 /// The sphere around the shapes (Mitsuba's scene bounds), and around the boxes of `open`
 /// media (the camera's and the global one) where they are grids, which no shape need enclose:
-/// where a directional light is placed (see [`Scene::sun_reach`]).
+/// where lights at infinity are placed (see [`Scene::infinite_reach`]).
 fn bounding_sphere<'m>(bvh: &Bvh, open: impl Iterator<Item = &'m Medium>) -> (glam::Vec3A, f32) {
     let boxes = open.filter_map(|m| match &m.kind {
         MediumKind::Heterogeneous(h) => Some(h.bounds()),
@@ -484,7 +487,12 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
         ("specular_reflectance", d.specular_reflectance.is_some()),
         ("nonlinear", d.nonlinear.is_some()),
     ];
-    let rough_only = [("distribution", d.distribution.is_some()), ("alpha", d.alpha.is_some())];
+    let rough_only = [
+        ("distribution", d.distribution.is_some()),
+        ("alpha", d.alpha.is_some()),
+        ("alpha_u", d.alpha_u.is_some()),
+        ("alpha_v", d.alpha_v.is_some()),
+    ];
     let metal_only =
         [("material", d.material.is_some()), ("eta", d.eta.is_some()), ("k", d.k.is_some())];
     let what = format!("{} surfaces", d.kind);
@@ -528,7 +536,7 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
                              index-matched boundary is a null bsdf",
                         );
                     }
-                    Bsdf::RoughDielectric(RoughDielectric { microfacet: microfacet(cx, d)?, eta })
+                    Bsdf::RoughDielectric(RoughDielectric { roughness: roughness(cx, d)?, eta })
                 }
             })
         }
@@ -566,7 +574,7 @@ fn bsdf(cx: &Ctx<'_>, d: Option<&BsdfDesc>) -> Result<Bsdf> {
             cx.only(&what, &[dielectric_only.as_slice(), &not_metal, other].concat())?;
             let metal = metal(cx, d)?;
             Ok(if rough {
-                Bsdf::RoughConductor(RoughConductor { metal, microfacet: microfacet(cx, d)? })
+                Bsdf::RoughConductor(RoughConductor { metal, roughness: roughness(cx, d)? })
             } else {
                 Bsdf::Conductor(Conductor(metal))
             })
@@ -583,12 +591,12 @@ fn mask(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Bsdf> {
     let Some(inner) = d.nested.as_deref() else {
         return cx.err("a mask needs the BSDF behind it: `nested = { type = ... }`");
     };
-    let opacity = d.opacity.unwrap_or(0.5);
-    if !(0.0..=1.0).contains(&opacity) {
-        return cx.err(format!("opacity {opacity} must lie in [0, 1]"));
-    }
+    let opacity = match &d.opacity {
+        None => Texture::Constant(Spectrum::splat(0.5)),
+        Some(t) => texture_within(cx, "opacity", t, Some(1.0))?,
+    };
     let nested = bsdf(cx, Some(inner))?;
-    if nested.null_transmission(1.0).is_some() {
+    if nested.may_pass() {
         return cx.err(format!(
             "a mask around a `{}` (which light passes itself) is not supported; mask a surface \
              that scatters",
@@ -626,24 +634,76 @@ fn metal(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Metal> {
 }
 
 /// The micro-normals of a rough surface: Mitsuba's `distribution` (default Beckmann) and
-/// `alpha` (default 0.1).
-fn microfacet(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Microfacet> {
-    let kind = match d.distribution.as_deref() {
-        None | Some("beckmann") => MicrofacetKind::Beckmann,
-        Some("ggx") => MicrofacetKind::Ggx,
-        Some(other) => {
-            return cx
-                .err(format!("unknown microfacet distribution `{other}`; use beckmann or ggx"));
+/// `alpha` (default 0.1), or `alpha_u` and `alpha_v` together; each a number or a texture.
+fn roughness(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Roughness> {
+    let kind = microfacet_kind(cx, d)?;
+    let (u, v) = match (&d.alpha, &d.alpha_u, &d.alpha_v) {
+        (Some(_), Some(_), _) | (Some(_), _, Some(_)) => {
+            return cx.err("give either `alpha` or `alpha_u` and `alpha_v`, not both");
+        }
+        (None, Some(_), None) | (None, None, Some(_)) => {
+            return cx.err("anisotropic roughness needs both `alpha_u` and `alpha_v`");
+        }
+        (None, None, None) => return Ok(Microfacet::isotropic(kind, 0.1).into()),
+        (Some(a), None, None) => (alpha_texture(cx, "alpha", a)?, None),
+        (None, Some(u), Some(v)) => {
+            (alpha_texture(cx, "alpha_u", u)?, Some(alpha_texture(cx, "alpha_v", v)?))
         }
     };
-    let alpha = d.alpha.unwrap_or(0.1);
-    if !(alpha.is_finite() && alpha >= MIN_ALPHA) {
+    Ok(match (&u, &v) {
+        (Texture::Constant(_), None) => Microfacet::isotropic(kind, u.eval_1(Vec2::ZERO)).into(),
+        (Texture::Constant(_), Some(Texture::Constant(_))) => {
+            let (alpha_u, alpha_v) = (u.eval_1(Vec2::ZERO), v.unwrap().eval_1(Vec2::ZERO));
+            Roughness::Constant(Microfacet { kind, alpha_u, alpha_v })
+        }
+        _ => Roughness::Textured { kind, alpha_u: Arc::new(u), alpha_v: v.map(Arc::new) },
+    })
+}
+
+/// A rough surface with one constant roughness (`roughplastic`, whose `alpha` Mitsuba takes
+/// as a number only).
+fn microfacet(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<Microfacet> {
+    if d.alpha_u.is_some() || d.alpha_v.is_some() {
         return cx.err(format!(
-            "alpha {alpha} is not a roughness zerovar renders: give at least {MIN_ALPHA} (for a \
-             smooth surface use dielectric or plastic)"
+            "a {} takes one `alpha`, as in Mitsuba; alpha_u and alpha_v are for roughconductor \
+             and roughdielectric",
+            d.kind
         ));
     }
-    Ok(Microfacet { kind, alpha })
+    match roughness(cx, d)? {
+        Roughness::Constant(m) => Ok(m),
+        Roughness::Textured { .. } => cx.err(format!(
+            "a {}'s `alpha` is a number, as in Mitsuba; textured roughness is for \
+             roughconductor and roughdielectric",
+            d.kind
+        )),
+    }
+}
+
+/// Mitsuba's `distribution` (default Beckmann).
+fn microfacet_kind(cx: &Ctx<'_>, d: &BsdfDesc) -> Result<MicrofacetKind> {
+    match d.distribution.as_deref() {
+        None | Some("beckmann") => Ok(MicrofacetKind::Beckmann),
+        Some("ggx") => Ok(MicrofacetKind::Ggx),
+        Some(other) => {
+            cx.err(format!("unknown microfacet distribution `{other}`; use beckmann or ggx"))
+        }
+    }
+}
+
+/// A roughness `name`: a number or a texture read as one number, at least [`MIN_ALPHA`]
+/// everywhere.
+fn alpha_texture(cx: &Ctx<'_>, name: &str, d: &TextureDesc) -> Result<Texture> {
+    let t = texture_within(cx, name, d, None)?;
+    let (lo, hi) = t.range_1();
+    if !(lo.is_finite() && hi.is_finite() && lo >= MIN_ALPHA) {
+        let at = if lo == hi { format!("{lo}") } else { format!("down to {lo}") };
+        return cx.err(format!(
+            "{name} {at} is not a roughness zerovar renders: give at least {MIN_ALPHA} (for a \
+             smooth surface use dielectric, plastic or conductor)"
+        ));
+    }
+    Ok(t)
 }
 
 /// Interior over exterior index of refraction, with Mitsuba's default interior `int` and air
@@ -698,7 +758,7 @@ fn read_picture(
 
 /// Mitsuba's bitmap texture from its image file (see [`read_picture`]), of reflectances in
 /// [0, 1].
-fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc) -> Result<Texture> {
+fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc, most: Option<f32>) -> Result<Texture> {
     let file = cx.file(&d.filename);
     let (width, height, texels) =
         read_picture(&file, d.raw.unwrap_or(false)).or_else(|e| cx.err(e))?;
@@ -720,10 +780,13 @@ fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc) -> Result<Texture> {
         return cx.err(format!("{}: the image is empty", file.display()));
     };
     let max = b.max();
-    if max.is_nan() || max > 1.0 || b.mean().min_element() < 0.0 || !b.mean().is_finite() {
+    if max.is_nan() || b.mean().min_element() < 0.0 || !b.mean().is_finite() {
+        return cx.err(format!("{}: texel values must be finite and non-negative", file.display()));
+    }
+    if let Some(most) = most.filter(|&m| max > m) {
         return cx.err(format!(
-            "{}: texel values reach {max}; a reflectance lies in [0, 1] (scale the image, or \
-             save it as PNG)",
+            "{}: texel values reach {max}; a reflectance lies in [0, {most}] (scale the image, \
+             or save it as PNG)",
             file.display()
         ));
     }
@@ -732,26 +795,33 @@ fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc) -> Result<Texture> {
 
 /// A reflectance texture `name` (0.5 grey when absent, as in Mitsuba).
 fn texture(cx: &Ctx<'_>, name: &str, d: Option<&TextureDesc>) -> Result<Texture> {
+    match d {
+        None => Ok(Texture::Constant(Spectrum::splat(0.5))),
+        Some(d) => texture_within(cx, name, d, Some(1.0)),
+    }
+}
+
+/// A texture `name` whose values may not exceed `most`.
+fn texture_within(cx: &Ctx<'_>, name: &str, d: &TextureDesc, most: Option<f32>) -> Result<Texture> {
     Ok(match d {
-        None => Texture::Constant(Spectrum::splat(0.5)),
-        Some(TextureDesc::Constant(c)) => Texture::Constant(cx.colour(name, *c, Some(1.0))?),
-        Some(TextureDesc::Checkerboard(c)) => {
+        TextureDesc::Constant(c) => Texture::Constant(cx.colour(name, *c, most)?),
+        TextureDesc::Checkerboard(c) => {
             if c.kind != "checkerboard" {
                 return cx.err(format!("unknown texture `{}`; use checkerboard or bitmap", c.kind));
             }
             let scale = c.scale.unwrap_or([1.0, 1.0]);
             cx.finite("checkerboard scale", &scale)?;
             Texture::Checkerboard {
-                color0: cx.colour("color0", c.color0.unwrap_or(Rgb::Grey(0.4)), Some(1.0))?,
-                color1: cx.colour("color1", c.color1.unwrap_or(Rgb::Grey(0.2)), Some(1.0))?,
+                color0: cx.colour("color0", c.color0.unwrap_or(Rgb::Grey(0.4)), most)?,
+                color1: cx.colour("color1", c.color1.unwrap_or(Rgb::Grey(0.2)), most)?,
                 scale: Vec2::from_array(scale),
             }
         }
-        Some(TextureDesc::Bitmap(b)) => {
+        TextureDesc::Bitmap(b) => {
             if b.kind != "bitmap" {
                 return cx.err(format!("unknown texture `{}`; use checkerboard or bitmap", b.kind));
             }
-            bitmap(cx, b)?
+            bitmap(cx, b, most)?
         }
     })
 }

@@ -238,10 +238,17 @@ pub struct BsdfDesc {
     pub k: Option<Rgb>,
     /// The rough kinds: "beckmann" (the default) or "ggx".
     pub distribution: Option<String>,
-    /// The rough kinds: the roughness (default 0.1).
-    pub alpha: Option<f32>,
-    /// Mask: the share of light that meets `nested` (default 0.5); the rest passes through.
-    pub opacity: Option<f32>,
+    /// The rough kinds: the roughness (default 0.1), a number or a texture (read as one
+    /// number: its luminance).
+    pub alpha: Option<TextureDesc>,
+    /// Roughconductor, roughdielectric: the roughness along the tangent (the direction of
+    /// growing `u`), with `alpha_v`, instead of `alpha`.
+    pub alpha_u: Option<TextureDesc>,
+    /// Roughconductor, roughdielectric: the roughness along the bitangent.
+    pub alpha_v: Option<TextureDesc>,
+    /// Mask: the share of light that meets `nested` (default 0.5), a number or a texture;
+    /// the rest passes through.
+    pub opacity: Option<TextureDesc>,
     /// Mask: the BSDF behind the mask.
     pub nested: Option<Box<BsdfDesc>>,
 }

@@ -15,11 +15,11 @@ use crate::accel::{Bvh, BvhHit, ShadowTrace};
 use crate::bsdf::Bsdf;
 use crate::camera::Camera;
 use crate::lights::Light;
-use crate::math::{Aabb, RAY_EPSILON, Ray};
+use crate::math::{Aabb, Frame, RAY_EPSILON, Ray};
 use crate::media::Medium;
 use crate::shapes::{Geometry, SurfaceHit};
 use crate::tracking::{Tracker, TrackerChoice, TrackerError};
-use glam::Vec3A;
+use glam::{Vec2, Vec3A};
 use std::path::{Path, PathBuf};
 use thiserror::Error;
 
@@ -256,12 +256,13 @@ pub fn load_str(
 }
 
 impl Scene {
-    /// How far from `p` a directional light's shadow ray reaches: twice the larger of the
-    /// scene's bounding radius and `p`'s distance from its centre, where Mitsuba places such a
-    /// light. Every shape and bounded medium lies within it, so only a medium without bounds
-    /// sees a difference from an infinite distance: the light comes through that much of it,
-    /// as in Mitsuba, where an infinite one would let none through.
-    pub fn sun_reach(&self, p: glam::Vec3A) -> f32 {
+    /// How far from `p` a shadow ray towards a light at infinity (a directional light, a
+    /// constant or mapped sky) reaches: twice the larger of the scene's bounding radius and
+    /// `p`'s distance from its centre, where Mitsuba places such lights. Every shape and
+    /// bounded medium lies within it, so only a medium without bounds sees a difference from
+    /// an infinite distance: the light comes through that much of it, as in Mitsuba, where an
+    /// infinite one would let none through.
+    pub fn infinite_reach(&self, p: glam::Vec3A) -> f32 {
         let (centre, radius) = self.world;
         2.0 * radius.max((p - centre).length()).max(1e-5)
     }
@@ -349,7 +350,19 @@ impl Scene {
             ng = -ng;
             ns = -ns;
         }
-        Some(SurfaceHit { t: h.hit.t, p, ng, ns, uv, shape })
+        Some(SurfaceHit { t: h.hit.t, p, ng, ns, uv, shape, prim: h.prim.index })
+    }
+
+    /// The shading frame at `hit` whose first axis follows the shape's parameterization (its
+    /// derivative along `u` made perpendicular to the shading normal), as Mitsuba 3 builds it
+    /// for anisotropic BSDFs; any frame about the normal where that derivative vanishes.
+    pub fn tangent_frame(&self, hit: &SurfaceHit) -> Frame {
+        let n = hit.ns;
+        let dp = self.shapes[hit.shape as usize].tangent(hit.prim, hit.p);
+        match (dp - n * n.dot(dp)).try_normalize() {
+            Some(s) => Frame { x: s, y: n.cross(s), z: n },
+            None => Frame::from_z(n),
+        }
     }
 
     /// Traces a shadow ray that starts in `medium` to `t_max` in one traversal:
@@ -365,8 +378,7 @@ impl Scene {
     ) -> ShadowTrace {
         crossings.clear();
         let mut hits = arrayvec::ArrayVec::<BvhHit, N>::new();
-        let blocks =
-            |shape: u32| self.surfaces[shape as usize].bsdf.null_transmission(1.0).is_none();
+        let blocks = |shape: u32| !self.surfaces[shape as usize].bsdf.may_pass();
         let trace = self.bvh.shadow(&self.shapes, ray, t_max, blocks, &mut hits);
         if trace == ShadowTrace::Clear {
             hits.sort_unstable_by(|a, b| a.hit.t.total_cmp(&b.hit.t));
@@ -379,7 +391,8 @@ impl Scene {
                 }
                 let cos = ray.direction.dot(ng);
                 medium = s.medium_beyond(cos < 0.0, medium);
-                let passes = self.null_transmission(h.prim.shape, cos).unwrap_or(0.0);
+                let uv = || self.shapes[shape].surface(h.prim.index, ray, h.hit).3;
+                let passes = self.null_transmission(h.prim.shape, cos, uv).unwrap_or(0.0);
                 Crossing { t: h.hit.t, passes, medium }
             }));
         }
@@ -389,13 +402,20 @@ impl Scene {
     /// The share of light passing straight through surface `shape` at `cos`
     /// (`Bsdf::null_transmission`), but none through a thin dielectric where every surface
     /// hit scatters (`RenderSettings::surface_events_only`).
+    /// `uv` gives the texture coordinates there, asked only of a textured mask.
     #[inline]
-    pub fn null_transmission(&self, shape: u32, cos: f32) -> Option<f32> {
+    pub fn null_transmission(
+        &self,
+        shape: u32,
+        cos: f32,
+        uv: impl FnOnce() -> Vec2,
+    ) -> Option<f32> {
         let bsdf = &self.surfaces[shape as usize].bsdf;
         if self.settings.surface_events_only && *bsdf != Bsdf::Null {
             return None;
         }
-        bsdf.null_transmission(cos)
+        let uv = if bsdf.passes_by_texture() { uv() } else { Vec2::ZERO };
+        bsdf.null_transmission(cos, uv)
     }
 
     /// The medium a ray leaving `hit` along `dir` travels in, having come in `current`.

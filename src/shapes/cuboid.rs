@@ -23,13 +23,20 @@ pub struct Cuboid {
     area: f32,
 }
 
-/// The local axes spanning face `axis`'s plane (as the cube mesh lays out its texture
-/// coordinates): `u` is the next axis, `v = n x u`.
+/// The outward normal of face `axis` on side `sign`, and the local directions in which its
+/// texture coordinates `u` and `v` grow, as Mitsuba's cube mesh lays them out.
 #[inline]
-fn face_axes(axis: usize, sign: f32) -> (Vec3A, Vec3A, Vec3A) {
+pub(super) fn face_axes(axis: usize, sign: f32) -> (Vec3A, Vec3A, Vec3A) {
     let n = Vec3A::from(glam::Vec3::AXES[axis]) * sign;
-    let u = Vec3A::from(glam::Vec3::AXES[(axis + 1) % 3]);
-    (n, u, n.cross(u))
+    let (u, v) = match (axis, sign > 0.0) {
+        (0, true) => (Vec3A::Y, Vec3A::NEG_Z),
+        (0, false) => (Vec3A::Y, Vec3A::Z),
+        (1, true) => (Vec3A::NEG_X, Vec3A::NEG_Z),
+        (1, false) => (Vec3A::Z, Vec3A::X),
+        (_, true) => (Vec3A::Y, Vec3A::X),
+        (_, false) => (Vec3A::NEG_Y, Vec3A::X),
+    };
+    (n, u, v)
 }
 
 impl Cuboid {
@@ -119,6 +126,21 @@ impl Cuboid {
         let uv = Vec2::new(0.5 * (q.dot(u) + 1.0), 0.5 * (q.dot(v) + 1.0));
         let n = self.normals[face];
         (self.to_world.point(q), n, n, uv)
+    }
+
+    /// Along the `u` axis of the face `p` lies on (the face whose plane it is nearest).
+    pub(super) fn tangent(&self, p: Vec3A) -> Vec3A {
+        let q = self.to_world.inv_point(p);
+        let a = q.abs();
+        let axis = if a.x >= a.y && a.x >= a.z {
+            0
+        } else if a.y >= a.z {
+            1
+        } else {
+            2
+        };
+        let (_, u, _) = face_axes(axis, q[axis].signum());
+        self.to_world.vector(u)
     }
 
     /// A point uniformly distributed over the surface, with its normal.

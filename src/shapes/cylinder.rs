@@ -123,6 +123,12 @@ impl Cylinder {
         (p, n, n, Vec2::new(u, local.z / self.length))
     }
 
+    /// Around the tube, as the azimuth `u` grows.
+    pub(super) fn tangent(&self, p: Vec3A) -> Vec3A {
+        let local = self.axes.to_local(p - self.origin);
+        self.axes.x * -local.y + self.axes.y * local.x
+    }
+
     pub(super) fn sample_area(&self, u: Vec2) -> (Vec3A, Vec3A) {
         let (sin, cos) = (2.0 * PI * u.y).sin_cos();
         let n = self.axes.x * cos + self.axes.y * sin;

@@ -62,6 +62,17 @@ impl Disk {
         (p, self.normal, self.normal, Vec2::new(r, v))
     }
 
+    /// Outwards along the radius (`u` is the radius); zero at the centre.
+    pub(super) fn tangent(&self, p: Vec3A) -> Vec3A {
+        let local = self.to_world.inv_point(p);
+        let r = (local.x * local.x + local.y * local.y).sqrt();
+        if r > 0.0 {
+            self.to_world.vector(Vec3A::new(local.x / r, local.y / r, 0.0))
+        } else {
+            Vec3A::ZERO
+        }
+    }
+
     pub(super) fn sample_area(&self, u: Vec2) -> (Vec3A, Vec3A) {
         let d = concentric_disk(u);
         (self.to_world.point(Vec3A::new(d.x, d.y, 0.0)), self.normal)

@@ -210,16 +210,20 @@ impl Mesh {
         let mut indices = Vec::with_capacity(12);
         for axis in 0..3 {
             for sign in [-1.0f32, 1.0] {
-                let n = Vec3A::from(glam::Vec3::AXES[axis]) * sign;
-                let u = Vec3A::from(glam::Vec3::AXES[(axis + 1) % 3]);
-                let v = n.cross(u);
+                let (n, u, v) = super::cuboid::face_axes(axis, sign);
                 let base = positions.len() as u32;
                 for (a, b) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
                     positions.push(n + u * a + v * b);
                     uvs.push(Vec2::new(0.5 * (a + 1.0), 0.5 * (b + 1.0)));
                 }
-                indices.push([base, base + 1, base + 2]);
-                indices.push([base, base + 2, base + 3]);
+                // Wound to face outwards whichever way u and v turn about the normal.
+                if u.cross(v).dot(n) > 0.0 {
+                    indices.push([base, base + 1, base + 2]);
+                    indices.push([base, base + 2, base + 3]);
+                } else {
+                    indices.push([base, base + 2, base + 1]);
+                    indices.push([base, base + 3, base + 2]);
+                }
             }
         }
         Self::new(positions, None, Some(uvs), indices, to_world)
@@ -311,6 +315,18 @@ impl Mesh {
         (p, ng, ns, uv)
     }
 
+    /// Triangle `i`'s derivative of the position along `u`: from its texture coordinates, or
+    /// along its first edge (Mitsuba's barycentric parameterization) without them; zero where
+    /// the texture coordinates are degenerate.
+    pub(super) fn tangent(&self, i: u32) -> Vec3A {
+        let (p0, p1, p2) = self.vertices(i);
+        let Some(t) = &self.uvs else { return p1 - p0 };
+        let [a, b, c] = self.indices[i as usize];
+        let (d0, d1) = (t[b as usize] - t[a as usize], t[c as usize] - t[a as usize]);
+        let det = d0.x * d1.y - d0.y * d1.x;
+        if det == 0.0 { Vec3A::ZERO } else { ((p1 - p0) * d1.y - (p2 - p0) * d0.y) / det }
+    }
+
     /// A uniformly distributed point on the mesh and the triangle's geometric normal.
     pub(super) fn sample_area(&self, u: Vec2) -> (Vec3A, Vec3A) {
         let (i, ux) = self.areas.sample(u.x);
@@ -334,6 +350,54 @@ mod tests {
             let (p0, p1, p2) = c.vertices(i);
             let n = (p1 - p0).cross(p2 - p0);
             assert!(n.dot((p0 + p1 + p2) / 3.0) > 0.0, "triangle {i} faces inward");
+        }
+    }
+
+    /// The cube's texture coordinates are Mitsuba 3's (`src/shapes/cube.cpp`): each face's
+    /// corners with their uv, one corner per row. A ray at each face, aimed near a corner,
+    /// finds that corner's uv.
+    #[test]
+    fn cube_texture_coordinates_are_mitsubas() {
+        let corners: [([f32; 3], [f32; 2]); 24] = [
+            ([1., -1., -1.], [0., 1.]),
+            ([1., -1., 1.], [1., 1.]),
+            ([-1., -1., 1.], [1., 0.]),
+            ([-1., -1., -1.], [0., 0.]),
+            ([1., 1., -1.], [0., 1.]),
+            ([-1., 1., -1.], [1., 1.]),
+            ([-1., 1., 1.], [1., 0.]),
+            ([1., 1., 1.], [0., 0.]),
+            ([1., -1., -1.], [0., 1.]),
+            ([1., 1., -1.], [1., 1.]),
+            ([1., 1., 1.], [1., 0.]),
+            ([1., -1., 1.], [0., 0.]),
+            ([1., -1., 1.], [0., 1.]),
+            ([1., 1., 1.], [1., 1.]),
+            ([-1., 1., 1.], [1., 0.]),
+            ([-1., -1., 1.], [0., 0.]),
+            ([-1., -1., 1.], [0., 1.]),
+            ([-1., 1., 1.], [1., 1.]),
+            ([-1., 1., -1.], [1., 0.]),
+            ([-1., -1., -1.], [0., 0.]),
+            ([1., 1., -1.], [0., 1.]),
+            ([1., -1., -1.], [1., 1.]),
+            ([-1., -1., -1.], [1., 0.]),
+            ([-1., 1., -1.], [0., 0.]),
+        ];
+        let c = Mesh::cube(&Transform::IDENTITY);
+        for face in corners.chunks(4) {
+            let centre = face.iter().map(|(p, _)| Vec3A::from(*p)).sum::<Vec3A>() / 4.0;
+            for &(p, uv) in face {
+                let target = centre + 0.9 * (Vec3A::from(p) - centre);
+                let ray = Ray::new(target + 2.0 * centre, -centre);
+                let (i, h) = (0..12)
+                    .filter_map(|i| c.intersect_triangle(i, &ray, 10.0).map(|h| (i, h)))
+                    .min_by(|a, b| a.1.t.total_cmp(&b.1.t))
+                    .unwrap();
+                let got = c.surface(i, &ray, h).3;
+                let want = Vec2::splat(0.5) + 0.9 * (Vec2::from(uv) - Vec2::splat(0.5));
+                assert!((got - want).length() < 1e-5, "corner {p:?}: uv {got} vs {want}");
+            }
         }
     }
 

@@ -50,6 +50,8 @@ pub struct SurfaceHit {
     pub uv: Vec2,
     /// Index of the shape in the scene.
     pub shape: u32,
+    /// Index of the primitive within the shape (a mesh's triangle).
+    pub prim: u32,
 }
 
 /// A point sampled on a surface.
@@ -138,6 +140,20 @@ impl Geometry {
         }
     }
 
+    /// The derivative of the position along `u` (its direction; zero where there is none) at
+    /// point `p` on primitive `i`, as Mitsuba 3 parameterizes each shape: the direction a
+    /// brushed (anisotropic) surface's tangent follows.
+    pub fn tangent(&self, i: u32, p: Vec3A) -> Vec3A {
+        match self {
+            Geometry::Sphere(s) => s.tangent(p),
+            Geometry::Disk(d) => d.tangent(p),
+            Geometry::Cylinder(c) => c.tangent(p),
+            Geometry::Cuboid(c) => c.tangent(p),
+            Geometry::Parallelogram(r) => r.tangent(),
+            Geometry::Mesh(m) => m.tangent(i),
+        }
+    }
+
     /// The geometric normal at a hit, as [`Self::surface`] gives it, without the rest: what a
     /// shadow ray crossing a boundary needs.
     pub fn normal(&self, i: u32, ray: &Ray, hit: PrimHit) -> Vec3A {
@@ -197,4 +213,95 @@ pub fn area_pdf_to_solid_angle(reference: Vec3A, p: Vec3A, n: Vec3A, pdf_area: f
     let dist2 = d.length_squared();
     let cos = (d.dot(n)).abs() / dist2.sqrt();
     if cos <= 0.0 || dist2 == 0.0 { 0.0 } else { pdf_area * dist2 / cos }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::math::Frame;
+    use crate::rng::Sampler;
+    use crate::transform::Transform;
+    use glam::Vec3;
+
+    /// The nearest hit of `ray` on any primitive of `g`: its primitive, point and uv.
+    fn hit(g: &Geometry, ray: &Ray) -> Option<(u32, Vec3A, Vec2)> {
+        let n = g.primitive_count() as u32;
+        let (i, h) = (0..n)
+            .filter_map(|i| g.intersect(i, ray, f32::INFINITY).map(|h| (i, h)))
+            .min_by(|a, b| a.1.t.total_cmp(&b.1.t))?;
+        let (p, _, _, uv) = g.surface(i, ray, h);
+        Some((i, p, uv))
+    }
+
+    /// `tangent` points along the derivative of the position in `u`, for every kind of shape
+    /// under rotation, non-uniform scaling and translation: two hits a small step to either
+    /// side of each hit give that derivative by finite differences, solved against their
+    /// changes in uv.
+    #[test]
+    fn tangents_follow_u() {
+        let place = Transform::rotate(Vec3::new(0.3, 1.0, 0.2), 35.0)
+            .unwrap()
+            .then(&Transform::translate(Vec3::new(0.2, -0.1, 0.4)));
+        let scaled = |s: Vec3| Transform::scale(s).unwrap().then(&place);
+        let stretch = scaled(Vec3::new(1.3, 0.8, 1.1));
+        let cube = Mesh::cube(&stretch);
+        let triangle = Mesh::new(
+            vec![
+                Vec3A::new(-1.0, -1.0, 0.0),
+                Vec3A::new(1.0, -0.5, 0.2),
+                Vec3A::new(0.0, 1.0, 0.0),
+            ],
+            None,
+            None,
+            vec![[0, 1, 2]],
+            &stretch,
+        )
+        .unwrap();
+        let shapes = [
+            ("sphere", Geometry::Sphere(Sphere::new(scaled(Vec3::splat(0.9))))),
+            ("disk", Geometry::Disk(Disk::new(stretch))),
+            ("tube", Geometry::Cylinder(Cylinder::new(&scaled(Vec3::new(0.7, 0.7, 2.0))).unwrap())),
+            ("cuboid", Geometry::Cuboid(Cuboid::new(stretch))),
+            ("rectangle", Geometry::Parallelogram(Parallelogram::new(&stretch).unwrap())),
+            ("mesh with uvs", Geometry::Mesh(cube)),
+            ("mesh without uvs", Geometry::Mesh(triangle)),
+        ];
+        let mut s = Sampler::new(3, 1, 4);
+        for (name, g) in &shapes {
+            let n = g.primitive_count() as u32;
+            let b = (1..n).fold(g.primitive_bounds(0), |b, i| b.union(&g.primitive_bounds(i)));
+            let centre = b.center();
+            let mut checked = 0;
+            for _ in 0..200 {
+                let dir = crate::math::uniform_sphere(s.next_2d());
+                let target = centre + 0.3 * (crate::math::uniform_sphere(s.next_2d()));
+                let ray = Ray::new(target + 6.0 * dir, -dir);
+                let Some((i, p, uv)) = hit(g, &ray) else { continue };
+                let f = Frame::from_z(ray.direction);
+                let step = |e: Vec3A| hit(g, &Ray::new(ray.origin + 1e-3 * e, ray.direction));
+                let (Some((i1, p1, uv1)), Some((i2, p2, uv2))) = (step(f.x), step(f.y)) else {
+                    continue;
+                };
+                let (du1, du2) = (uv1 - uv, uv2 - uv);
+                // Across a seam of the parameterization, or onto another face: no derivative.
+                if i1 != i
+                    || i2 != i
+                    || du1.abs().max_element() > 0.1
+                    || du2.abs().max_element() > 0.1
+                {
+                    continue;
+                }
+                let det = du1.x * du2.y - du2.x * du1.y;
+                if det.abs() < 1e-9 {
+                    continue;
+                }
+                let dp_du = ((p1 - p) * du2.y - (p2 - p) * du1.y) / det;
+                let t = g.tangent(i, p);
+                let cos = t.normalize().dot(dp_du.normalize());
+                assert!(cos > 0.995, "{name} at {p}: tangent {t} against dp/du {dp_du}");
+                checked += 1;
+            }
+            assert!(checked > 50, "{name}: only {checked} hits checked");
+        }
+    }
 }

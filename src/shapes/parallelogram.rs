@@ -84,6 +84,10 @@ impl Parallelogram {
         (p, self.normal, self.normal, hit.b)
     }
 
+    pub(super) fn tangent(&self) -> Vec3A {
+        self.edge_u
+    }
+
     pub(super) fn area(&self) -> f32 {
         self.area
     }

@@ -85,6 +85,12 @@ impl Sphere {
         (p, n, n, Vec2::new(u, v))
     }
 
+    /// Along the parallel, as the azimuth `u` grows; zero at the poles.
+    pub(super) fn tangent(&self, p: Vec3A) -> Vec3A {
+        let local = self.to_world.inv_vector(p - self.center);
+        self.to_world.vector(Vec3A::new(-local.y, local.x, 0.0))
+    }
+
     pub(super) fn sample(&self, reference: Vec3A, u: Vec2) -> Option<AreaSample> {
         let to_center = self.center - reference;
         let d2 = to_center.length_squared();

@@ -122,11 +122,11 @@ pub(super) fn bsdf(conv: &Conv, o: &Rc<Object>) -> Result<BsdfDesc> {
     let mut d = BsdfDesc { kind: o.kind.clone(), ..Default::default() };
     match o.kind.as_str() {
         "null" => {}
-        "diffuse" => d.reflectance = reflectance(conv, &p, "reflectance")?,
+        "diffuse" => d.reflectance = texture_prop(conv, &p, "reflectance")?,
         "dielectric" | "thindielectric" => (d.int_ior, d.ext_ior) = iors(&p)?,
         "roughdielectric" => {
             (d.int_ior, d.ext_ior) = iors(&p)?;
-            roughness(&p, &mut d)?;
+            roughness(conv, &p, &mut d)?;
         }
         "conductor" | "roughconductor" => {
             d.material = p.string("material")?.map(|(s, _)| s.to_string());
@@ -134,28 +134,21 @@ pub(super) fn bsdf(conv: &Conv, o: &Rc<Object>) -> Result<BsdfDesc> {
             d.k = p.color("k")?;
             d.specular_reflectance = p.color("specular_reflectance")?;
             if o.kind == "roughconductor" {
-                roughness(&p, &mut d)?;
+                roughness(conv, &p, &mut d)?;
             }
         }
         "plastic" | "roughplastic" => {
-            d.diffuse_reflectance = reflectance(conv, &p, "diffuse_reflectance")?;
+            d.diffuse_reflectance = texture_prop(conv, &p, "diffuse_reflectance")?;
             d.specular_reflectance = p.color("specular_reflectance")?;
             (d.int_ior, d.ext_ior) = iors(&p)?;
             d.nonlinear = p.boolean("nonlinear")?;
             if o.kind == "roughplastic" {
-                roughness(&p, &mut d)?;
+                roughness(conv, &p, &mut d)?;
             }
         }
         "mask" => {
             let inner = p.objects("bsdf");
-            d.opacity = match p.raw("opacity") {
-                Some(prop) if matches!(prop.value, Value::Object(_)) => {
-                    return Err(prop.pos.err(
-                        "a textured opacity is not supported; give the mask's opacity as a <float>",
-                    ));
-                }
-                _ => p.float("opacity")?,
-            };
+            d.opacity = texture_prop(conv, &p, "opacity")?;
             p.finish()?;
             let [(_, inner)] = inner.as_slice() else {
                 return Err(p.err("mask wraps exactly one <bsdf>"));
@@ -185,22 +178,20 @@ pub(super) fn bsdf(conv: &Conv, o: &Rc<Object>) -> Result<BsdfDesc> {
     Ok(d)
 }
 
-/// A rough surface's `distribution` and `alpha`. `sample_visible` is accepted and has no
-/// effect: zerovar always samples visible normals, which changes noise, not the image.
-fn roughness(p: &Props<'_>, d: &mut BsdfDesc) -> Result<()> {
-    if let Some(prop) = p.raw("alpha_u").or_else(|| p.raw("alpha_v")) {
-        return Err(prop
-            .pos
-            .err("anisotropic roughness (alpha_u, alpha_v) is not supported; give one `alpha`"));
-    }
+/// A rough surface's `distribution` and `alpha` (or `alpha_u` and `alpha_v`), each a number
+/// or a texture. `sample_visible` is accepted and has no effect: zerovar always samples
+/// visible normals, which changes noise, not the image.
+fn roughness(conv: &Conv, p: &Props<'_>, d: &mut BsdfDesc) -> Result<()> {
     d.distribution = p.string("distribution")?.map(|(s, _)| s.to_lowercase());
-    d.alpha = p.float("alpha")?;
+    d.alpha = texture_prop(conv, p, "alpha")?;
+    d.alpha_u = texture_prop(conv, p, "alpha_u")?;
+    d.alpha_v = texture_prop(conv, p, "alpha_v")?;
     p.boolean("sample_visible")?;
     Ok(())
 }
 
-/// A reflectance `name`: a colour or a nested `<texture>`.
-fn reflectance(conv: &Conv, p: &Props<'_>, name: &'static str) -> Result<Option<TextureDesc>> {
+/// A texture-valued property `name`: a number, a colour or a nested `<texture>`.
+fn texture_prop(conv: &Conv, p: &Props<'_>, name: &'static str) -> Result<Option<TextureDesc>> {
     let Some(prop) = p.raw(name) else { return Ok(None) };
     Ok(Some(match &prop.value {
         Value::Object(t) if t.tag == "texture" => texture(conv, t)?,
