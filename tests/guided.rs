@@ -1852,6 +1852,27 @@ fn hard_cases_render_guided_as_unguided() {
     }
 }
 
+/// Guiding at rough metal (`Bsdf::guides`): the fog scene over a brushed copper floor whose
+/// roughness across the brushing is a checkerboard, rendered with full guiding, converges to
+/// the unguided image.
+#[test]
+fn rough_metal_renders_guided_as_unguided() {
+    let floor = "transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 4 }]";
+    let metal = format!(
+        "{floor}\nbsdf = {{ type = \"roughconductor\", material = \"Cu\", alpha_u = 0.05, \
+         alpha_v = {{ type = \"checkerboard\", color0 = 0.4, color1 = 0.1, scale = [4, 4] }} }}"
+    );
+    let text = FOG.replace(floor, &metal);
+    assert_ne!(text, FOG);
+    let s = scene(&text);
+    let unguided = quadrant_means(&render_with(&s, Components::OFF, 0.0, 4096, 41));
+    let guided = over_seeds(4, |seed| render_with(&s, Components::FULL, 0.5, 256, seed));
+    for (k, (a, b)) in guided.iter().zip(&unguided).enumerate() {
+        let z = z_score(a, b);
+        assert!(z.abs() < 4.5, "quadrant {k}: guided {} vs {} (z = {z:.2})", a.mean, b.mean);
+    }
+}
+
 /// Directions drawn at a point light's glow (`guided::halo`) carry small weights (the halo's
 /// density is large there) towards light that the fitted field does not see, so weight windows
 /// rouletted nearly all of them at the smallest survival, and the survivors' extra collisions

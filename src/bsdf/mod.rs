@@ -331,15 +331,22 @@ impl Bsdf {
         )
     }
 
-    /// Whether a guiding field of incident radiance can help choose directions here: where the
-    /// BSDF has a diffuse part. A glossy lobe (the rough dielectric's) is narrower than the
-    /// field's mixtures resolve, so its own sampling draws every direction; so is a rough
-    /// metal's.
+    /// Whether a guiding field of incident radiance helps at this surface, choosing directions
+    /// and deciding roulette and splitting: where the BSDF has a diffuse part, and at rough
+    /// metal, where guiding paid at every roughness measured, narrow lobes included (the
+    /// mixture keeps the BSDF's own share). Not at rough glass, where it lost
+    /// (docs/experiments.md, 2026-12-07).
     pub fn guides(&self) -> bool {
         if let Bsdf::Mask { nested, .. } = self {
             return nested.guides();
         }
-        matches!(self, Bsdf::Diffuse { .. } | Bsdf::Plastic(_) | Bsdf::RoughPlastic(_))
+        matches!(
+            self,
+            Bsdf::Diffuse { .. }
+                | Bsdf::Plastic(_)
+                | Bsdf::RoughPlastic(_)
+                | Bsdf::RoughConductor(_)
+        )
     }
 
     /// BSDF times |cos wi| for a pair of local directions.
