@@ -169,7 +169,8 @@ fn paths<C: RadianceCache>(
     for i in first..first + BATCH {
         let mut s = Sampler::new(4, 0, i);
         let [w, h] = scene.camera().resolution().map(|r| r as f32);
-        let start = PathStart::camera(scene, s.next_2d() * Vec2::new(w, h));
+        let film = s.next_2d() * Vec2::new(w, h);
+        let start = PathStart::camera(scene, film, &mut s);
         let mut ctx = WalkContext { cache: &mut *cache, pixel: None, recorder: None, trace: None };
         sum += radiance(settings, scene, start, &mut ctx, &mut s, counters).x;
     }

@@ -1,12 +1,14 @@
-//! The perspective pinhole camera, placed by a look-at transform (Mitsuba 3 conventions: the
-//! field of view is measured along the horizontal axis by default, image x runs to the right
-//! and image y downwards), with a pixel filter that spreads each pixel's samples over the film
-//! (a box by default: a sample lands uniformly in its pixel; see [`crate::filter`]).
-//! Its rays start on the near clipping plane and reach the far one, as Mitsuba's do: for a
+//! The perspective camera, a pinhole or Mitsuba's thin lens, placed by a look-at transform
+//! (Mitsuba 3 conventions: the field of view is measured along the horizontal axis by default,
+//! image x runs to the right and image y downwards), with a pixel filter that spreads each
+//! pixel's samples over the film (a box by default: a sample lands uniformly in its pixel; see
+//! [`crate::filter`]). A thin lens starts each ray at a point of its aperture, aimed at the
+//! point of the focal plane the pinhole's ray would reach, so only that plane is sharp.
+//! Rays start on the near clipping plane and reach the far one, as Mitsuba's do: for a
 //! camera inside a medium, the near plane decides how much of it lies before the first ray.
 
 use crate::filter::{FilterTable, PixelFilter};
-use crate::math::Ray;
+use crate::math::{Ray, concentric_disk};
 use crate::rng::Sampler;
 use crate::transform::Transform;
 use glam::{Vec2, Vec3A};
@@ -34,6 +36,10 @@ pub struct Camera {
     far: f32,
     /// How a pixel's samples spread over the film.
     filter: FilterTable,
+    /// The thin lens's aperture radius (0: a pinhole) and the distance of its focal plane
+    /// along the view axis.
+    aperture: f32,
+    focus: f32,
 }
 
 impl Camera {
@@ -49,7 +55,19 @@ impl Camera {
         let origin = to_world.point(Vec3A::ZERO);
         let filter = FilterTable::new(PixelFilter::Box).expect("the box filter");
         let (near, far) = (0.0, f32::INFINITY);
-        Self { to_world, origin, tan_half, resolution, near, far, filter }
+        let (aperture, focus) = (0.0, 1.0);
+        Self { to_world, origin, tan_half, resolution, near, far, filter, aperture, focus }
+    }
+
+    /// The camera as Mitsuba's thin lens of aperture radius `aperture` (0 keeps the pinhole),
+    /// in focus at distance `focus` along the view axis (positive).
+    pub fn with_lens(self, aperture: f32, focus: f32) -> Self {
+        Self { aperture, focus, ..self }
+    }
+
+    /// Whether rays start across an aperture, so that each needs a point of the lens.
+    pub fn has_lens(&self) -> bool {
+        self.aperture > 0.0
     }
 
     /// The camera with the pixel filter of `filter` (a box by default).
@@ -87,15 +105,16 @@ impl Camera {
     }
 
     /// The primary ray through film position `film` (pixels, continuous, origin top left),
-    /// starting on the near clipping plane.
+    /// starting on the near clipping plane (through the lens's centre).
     #[inline]
     pub fn ray(&self, film: Vec2) -> Ray {
-        self.ray_and_reach(film).0
+        self.ray_and_reach(film, Vec2::splat(0.5)).0
     }
 
-    /// The primary ray through `film`, and how far along it the far clipping plane lies.
+    /// The primary ray through `film` from the point of the lens that `lens` (uniform in the
+    /// unit square) picks, and how far along it the far clipping plane lies.
     #[inline]
-    pub fn ray_and_reach(&self, film: Vec2) -> (Ray, f32) {
+    pub fn ray_and_reach(&self, film: Vec2, lens: Vec2) -> (Ray, f32) {
         let ndc = Vec2::new(film.x / self.resolution[0] as f32, film.y / self.resolution[1] as f32);
         // Local +x is the camera's left, +y its up (look-at frame), so both axes flip.
         let local = Vec3A::new(
@@ -103,11 +122,25 @@ impl Camera {
             (1.0 - 2.0 * ndc.y) * self.tan_half.y,
             1.0,
         );
+        if self.aperture > 0.0 {
+            return self.lens_ray(local, lens);
+        }
         // The local direction's length is 1 / cos of its angle to the view axis, along which
         // the planes' distances are measured.
         let (direction, secant) = (self.to_world.vector(local).normalize(), local.length());
         let origin = self.origin + direction * (self.near * secant);
         (Ray::new(origin, direction), (self.far - self.near) * secant)
+    }
+
+    /// The thin lens's ray from aperture point `lens` towards where the pinhole's ray along
+    /// `local` (local z 1) meets the focal plane.
+    fn lens_ray(&self, local: Vec3A, lens: Vec2) -> (Ray, f32) {
+        let p = concentric_disk(lens) * self.aperture;
+        let start = Vec3A::new(p.x, p.y, 0.0);
+        let d = (local * self.focus - start).normalize();
+        let (near, far) = (self.near / d.z, self.far / d.z);
+        let origin = self.to_world.point(start + d * near);
+        (Ray::new(origin, self.to_world.vector(d).normalize()), far - near)
     }
 }
 
@@ -137,7 +170,7 @@ mod tests {
         for (film, secant) in
             [(Vec2::new(100.0, 50.0), 1.0f32), (Vec2::new(200.0, 50.0), 2f32.sqrt())]
         {
-            let (ray, reach) = cam.ray_and_reach(film);
+            let (ray, reach) = cam.ray_and_reach(film, Vec2::splat(0.5));
             let start = Vec3A::new(0.0, 0.0, 5.0) + ray.direction * (0.5 * secant);
             assert!((ray.origin - start).length() < 1e-5, "{film}: {}", ray.origin);
             assert!((ray.origin.z - 4.5).abs() < 1e-5, "the near plane is z = 4.5");
@@ -145,7 +178,34 @@ mod tests {
             assert!((ray.at(reach).z - 1.0).abs() < 1e-5, "the far plane is z = 1");
         }
         let unclipped = Camera::new(to_world, 90.0, FovAxis::X, [200, 100]);
-        let (ray, reach) = unclipped.ray_and_reach(Vec2::new(10.0, 20.0));
+        let (ray, reach) = unclipped.ray_and_reach(Vec2::new(10.0, 20.0), Vec2::splat(0.5));
         assert_eq!((ray.origin, reach), (Vec3A::new(0.0, 0.0, 5.0), f32::INFINITY));
+    }
+
+    /// A thin lens's rays through one film position start across the aperture (within its
+    /// radius, on the near plane) and all pass where the pinhole's ray meets the focal plane.
+    #[test]
+    fn thin_lens_rays_meet_on_the_focal_plane() {
+        let to_world = Transform::look_at(Vec3::new(0.0, 0.0, 5.0), Vec3::ZERO, Vec3::Y).unwrap();
+        let pinhole = Camera::new(to_world, 60.0, FovAxis::X, [64, 48]).with_clip(0.1, 100.0);
+        let lens = pinhole.clone().with_lens(0.25, 3.0);
+        assert!(lens.has_lens() && !pinhole.has_lens());
+        let film = Vec2::new(50.0, 10.0);
+        let (axis, _) = pinhole.ray_and_reach(film, Vec2::splat(0.5));
+        // The focal plane is z = 2 (3 in front of the eye along -z).
+        let focus = axis.at((axis.origin.z - 2.0) / -axis.direction.z);
+        let mut sampler = Sampler::new(1, 2, 3);
+        for _ in 0..100 {
+            let (ray, reach) = lens.ray_and_reach(film, sampler.next_2d());
+            assert!((ray.origin.z - 4.9).abs() < 1e-5, "on the near plane: {}", ray.origin);
+            let t = (ray.origin.z - 2.0) / -ray.direction.z;
+            assert!((ray.at(t) - focus).length() < 1e-4, "{} vs {focus}", ray.at(t));
+            // Back on the lens plane (z = 5) the ray starts within the aperture.
+            let back = ray.at(-0.1 / -ray.direction.z);
+            assert!(((back - Vec3A::new(0.0, 0.0, 5.0)).length()) <= 0.25 + 1e-5, "{back}");
+            assert!((ray.at(reach).z - (5.0 - 100.0)).abs() < 1e-2, "far plane: {reach}");
+        }
+        // The lens's centre is the pinhole.
+        assert!((lens.ray(film).direction - axis.direction).length() < 1e-6);
     }
 }

@@ -34,7 +34,8 @@ fn camera_sample<C: RadianceCache>(
     let mut sampler = Sampler::new(stream, 0, i);
     let [w, h] = s.camera().resolution();
     let film = sampler.next_2d() * Vec2::new(w as f32, h as f32);
-    walk::radiance(settings, s, walk::PathStart::camera(s, film), ctx, &mut sampler, counters)
+    let start = walk::PathStart::camera(s, film, &mut sampler);
+    walk::radiance(settings, s, start, ctx, &mut sampler, counters)
 }
 
 /// A cache with fixed estimates: `incident` and `inscattered` times a bright blob around

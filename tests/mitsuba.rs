@@ -438,3 +438,17 @@ fn mitsuba_zf_textured_roughness_and_opacity() {
     let (from, to) = ("\"color0\" value=\"0.03\"", "\"color0\" value=\"0.5\"");
     edited_disagrees("zf-textured-rough", 4096, from, to, "a checkerboard of one roughness");
 }
+
+/// Mitsuba's `thinlens` sensor: spheres before, at and beyond the focal plane over a checkered
+/// floor, through fog; with spectrum pairs separated by spaces and emitters' `sampling_weight`
+/// (Mitsuba's noise, not its image). A pinhole instead disagrees with Mitsuba's image: the test
+/// sees the blur.
+#[test]
+fn mitsuba_zg_thin_lens() {
+    validate("zg-thinlens", 4096);
+    let (from, to) = (
+        "value=\"0.2\"/>\n        <float name=\"focus",
+        "value=\"0.001\"/>\n        <float name=\"focus",
+    );
+    edited_disagrees("zg-thinlens", 4096, from, to, "a pinhole");
+}

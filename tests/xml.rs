@@ -1387,7 +1387,7 @@ fn camera_rays_run_between_mitsubas_clipping_planes() {
                 let mut sampler = Sampler::new(9, 0, i);
                 let mut cache = NoCache;
                 let mut ctx = WalkContext::new(&mut cache);
-                let start = PathStart::camera(s, axis);
+                let start = PathStart::camera(s, axis, &mut sampler);
                 f64::from(radiance(&settings, s, start, &mut ctx, &mut sampler, &mut counters).x)
             })
             .collect();
@@ -1399,7 +1399,7 @@ fn camera_rays_run_between_mitsubas_clipping_planes() {
     // Mitsuba's defaults, then a near plane 2 units out: transmittances 0.369 and 0.549, each
     // estimated to about 0.7%.
     for (s, near) in [(scene(""), 0.01f64), (scene(&clip(2.0, 1e4)), 2.0)] {
-        let (ray, reach) = s.camera().ray_and_reach(axis);
+        let (ray, reach) = s.camera().ray_and_reach(axis, Vec2::splat(0.5));
         assert!((f64::from(ray.origin.z) - (5.0 - near)).abs() < 1e-5, "{}", ray.origin);
         let (est, expected) = (seen(&s), (-0.2 * (5.0 - near)).exp());
         // Closed-form tracking may weigh the flight by its transmittance exactly.
@@ -1665,4 +1665,42 @@ fn lights_at_infinity_are_twice_the_scenes_radius_away() {
     assert!((s.infinite_reach(inside) - 2.0 * radius).abs() < 1e-4);
     let far = Vec3A::new(22.0, 0.0, 0.0);
     assert!((s.infinite_reach(far) - 40.0).abs() < 1e-4, "{}", s.infinite_reach(far));
+}
+
+/// Mitsuba's `thinlens` sensor (its aperture required, its focus the far plane by default),
+/// spectra whose wavelength:value pairs are separated by spaces as Mitsuba's tokenizer allows,
+/// and emitters' `sampling_weight`: equal weights accepted, unequal ones (which change
+/// Mitsuba's image) an error naming the place.
+#[test]
+fn thin_lens_spaced_spectra_and_sampling_weights() {
+    let scene = |sensor: &str, light: &str| {
+        format!(
+            "<scene version=\"3.0.0\"><sensor type={sensor}<float name=\"fov\" value=\"40\"/>\
+             </sensor><shape type=\"sphere\"><bsdf type=\"diffuse\"/>{light}</shape>\
+             <emitter type=\"constant\"><float name=\"sampling_weight\" value=\"2\"/></emitter></scene>"
+        )
+    };
+    let area = |w: &str| {
+        format!("<emitter type=\"area\"><float name=\"sampling_weight\" value=\"{w}\"/></emitter>")
+    };
+    let (lens, pinhole) =
+        ("\"thinlens\"><float name=\"aperture_radius\" value=\"0.1\"/>", "\"perspective\">");
+    let s = xml("lens.xml", &scene(lens, &area("2")), &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(s.camera().has_lens());
+    let e = xml("lens-bad.xml", &scene("\"thinlens\">", ""), &[]).unwrap_err().to_string();
+    assert!(e.contains("lens-bad.xml:1:") && e.contains("aperture_radius"), "{e}");
+    let e = xml("weights.xml", &scene(pinhole, &area("3")), &[]).unwrap_err().to_string();
+    assert!(e.contains("weights.xml:1:") && e.contains("sampling_weight differ"), "{e}");
+    // A light without a weight weighs 1, which differs from 2.
+    let e = xml("weights-2.xml", &scene(pinhole, "<emitter type=\"area\"/>"), &[]).unwrap_err();
+    assert!(e.to_string().contains("sampling_weight differ"), "{e}");
+    let spectrum = |sep: &str| {
+        let value = ["400:0.1", "500:0.2", "600:0.8", "700:0.9"].join(sep);
+        sphere_with(&format!(
+            "<bsdf type=\"diffuse\"><spectrum name=\"reflectance\" value=\"{value}\"/></bsdf>"
+        ))
+    };
+    let commas = xml("spectrum-commas.xml", &spectrum(", "), &[]).unwrap();
+    let spaces = xml("spectrum-spaces.xml", &spectrum(" \n "), &[]).unwrap();
+    assert_eq!(commas.surfaces()[0].bsdf, spaces.surfaces()[0].bsdf);
 }

@@ -155,9 +155,11 @@ impl PathStart {
     }
 
     /// The camera ray of `scene` through film position `film` (pixels), clipped as the
-    /// camera clips.
-    pub fn camera(scene: &Scene, film: Vec2) -> Self {
-        let (ray, reach) = scene.camera.ray_and_reach(film);
+    /// camera clips; a thin lens takes its point of the aperture from `sampler`.
+    pub fn camera(scene: &Scene, film: Vec2, sampler: &mut Sampler) -> Self {
+        let camera = &scene.camera;
+        let lens = if camera.has_lens() { sampler.next_2d() } else { Vec2::splat(0.5) };
+        let (ray, reach) = camera.ray_and_reach(film, lens);
         Self { ray, reach, medium: scene.camera_medium }
     }
 }

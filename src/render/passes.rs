@@ -264,7 +264,7 @@ pub(super) fn camera_sample<C: RadianceCache>(
     let mut sampler = Sampler::new(seed, pixel, u64::from(s));
     let camera = &scene.camera;
     let (film, weight) = camera.film_sample([x, y], &mut sampler);
-    let start = walk::PathStart::camera(scene, film);
+    let start = walk::PathStart::camera(scene, film, &mut sampler);
     walk::radiance(settings, scene, start, ctx, &mut sampler, counters) * weight
 }
 

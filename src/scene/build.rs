@@ -107,7 +107,23 @@ fn camera(cx: &Ctx<'_>, cam: &CameraDesc) -> Result<Camera> {
         Ok(f) => f,
         Err(why) => return cx.err(format!("pixel filter: {why}")),
     };
-    let camera = Camera::new(to_world, cam.fov, cam.fov_axis, resolution);
+    if !(cam.aperture_radius >= 0.0 && cam.aperture_radius.is_finite()) {
+        return cx.err(format!(
+            "aperture_radius {} must be a finite radius, 0 (a pinhole) or more",
+            cam.aperture_radius
+        ));
+    }
+    let focus = cam.focus_distance.unwrap_or(cam.far_clip);
+    if cam.aperture_radius > 0.0 && !(focus > 0.0 && focus.is_finite()) {
+        return cx.err(match cam.focus_distance {
+            None => "a thin lens (aperture_radius above 0) needs focus_distance where there is \
+                     no far clipping plane"
+                .to_string(),
+            Some(f) => format!("focus_distance {f} must be a finite distance above 0"),
+        });
+    }
+    let camera = Camera::new(to_world, cam.fov, cam.fov_axis, resolution)
+        .with_lens(cam.aperture_radius, focus);
     Ok(camera.with_clip(cam.near_clip, cam.far_clip).with_filter(filter))
 }
 

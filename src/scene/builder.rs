@@ -131,6 +131,8 @@ impl CameraDesc {
             far_clip: f32::INFINITY,
             filter: Default::default(),
             mirror: false,
+            aperture_radius: 0.0,
+            focus_distance: None,
         }
     }
 }

@@ -166,6 +166,12 @@ pub struct CameraDesc {
     /// scales by -1 sees it (default false).
     #[serde(default)]
     pub mirror: bool,
+    /// A thin lens's aperture radius (default 0: a pinhole, everything sharp).
+    #[serde(default)]
+    pub aperture_radius: f32,
+    /// A thin lens's distance of sharp focus along the view axis (default: the far clipping
+    /// plane, as in Mitsuba; required with an aperture and no far plane).
+    pub focus_distance: Option<f32>,
 }
 
 fn up() -> Vec3 {

@@ -36,6 +36,7 @@ pub(super) fn parse(
         search,
         media: BTreeMap::new(),
         medium_names: HashMap::new(),
+        sampling_weight: Default::default(),
     };
     let desc = scene::scene(&mut conv, &root)?;
     Ok((desc, sources))
@@ -50,6 +51,9 @@ struct Conv {
     media: BTreeMap<String, Spanned<MediumDesc>>,
     /// The name each medium object got, so a medium referenced twice is one medium.
     medium_names: HashMap<*const Object, String>,
+    /// The first emitter's `sampling_weight` (1 where it gives none) and where it was given:
+    /// every other emitter's must equal it (see `shapes::sampling_weight`).
+    sampling_weight: std::cell::RefCell<Option<(f32, Option<tree::Pos>)>>,
 }
 
 impl Conv {

@@ -116,12 +116,21 @@ pub(super) fn scene(conv: &mut Conv, root: &Object) -> Result<SceneDesc> {
     })
 }
 
-/// The perspective sensor: the camera, and the sampler's spp and seed.
+/// The perspective or thin-lens sensor: the camera, and the sampler's spp and seed.
 fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>, RenderDesc)> {
     let p = Props::new(o);
-    if o.kind != "perspective" {
-        return Err(p.err("zerovar has only the `perspective` sensor"));
+    if o.kind != "perspective" && o.kind != "thinlens" {
+        return Err(p.err("zerovar has the `perspective` and `thinlens` sensors"));
     }
+    // Mitsuba's thin lens asks for its aperture; its focus defaults to the far plane.
+    let (aperture_radius, focus_distance) = if o.kind == "thinlens" {
+        let Some(r) = p.float("aperture_radius")? else {
+            return Err(p.err("a thinlens sensor needs <float name=\"aperture_radius\" .../>"));
+        };
+        (r, p.float("focus_distance")?)
+    } else {
+        (0.0, None)
+    };
     let fov = p.float("fov")?;
     let focal_length = p.string("focal_length")?;
     if fov.is_some() && focal_length.is_some() {
@@ -221,6 +230,8 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
         far_clip,
         filter,
         mirror,
+        aperture_radius,
+        focus_distance: focus_distance.or(Some(far_clip)),
     };
     Ok((spanned(&o.pos, camera), render))
 }

@@ -80,6 +80,7 @@ pub(super) fn shape(conv: &mut Conv, o: &Rc<Object>) -> Result<Spanned<ShapeDesc
                 );
             }
             let radiance = ep.color("radiance")?.unwrap_or(Rgb::Grey(1.0));
+            sampling_weight(conv, &ep)?;
             ep.finish()?;
             Some(EmitterDesc { radiance })
         }
@@ -283,6 +284,7 @@ pub(super) fn light(conv: &Conv, o: &Rc<Object>) -> Result<Spanned<LightDesc>> {
     let to_world = |p: &Props<'_>| -> Result<Option<crate::transform::Transform>> {
         p.transform("to_world")?.map(|s| compose(s, &o.pos, "to_world")).transpose()
     };
+    sampling_weight(conv, &p)?;
     match o.kind.as_str() {
         "point" => {
             d.intensity = p.color("intensity")?.or(one);
@@ -327,6 +329,40 @@ pub(super) fn light(conv: &Conv, o: &Rc<Object>) -> Result<Spanned<LightDesc>> {
     }
     p.finish()?;
     Ok(spanned(&o.pos, d))
+}
+
+/// An emitter's `sampling_weight`, Mitsuba's share of next-event estimates for it. Weights
+/// that are all equal change nothing in Mitsuba's image and are accepted (zerovar picks lights
+/// by its own rule). Unequal ones change Mitsuba 3.9.1's image, not only its noise (its mean
+/// by a fifth on a test scene, docs/experiments.md), which zerovar does not reproduce: they
+/// are an error.
+fn sampling_weight(conv: &Conv, p: &Props<'_>) -> Result<()> {
+    let given = p.float("sampling_weight")?;
+    let pos = p.raw("sampling_weight").map(|prop| prop.pos.clone());
+    let w = given.unwrap_or(1.0);
+    if !(w > 0.0 && w.is_finite()) {
+        return Err(p.err(format!("sampling_weight {w} must be a positive number")));
+    }
+    let mut first = conv.sampling_weight.borrow_mut();
+    match &*first {
+        None => *first = Some((w, pos)),
+        Some((v, _)) if *v == w => {}
+        Some((v, at)) => {
+            let at = at.as_ref().map_or("no sampling_weight (1)".to_string(), |a| {
+                format!("{v} at line {}", a.line)
+            });
+            let message = format!(
+                "emitters' sampling_weight differ ({w} here, {at} on another): Mitsuba's image \
+                 then changes with them, not only its noise, and zerovar does not reproduce \
+                 that; give every emitter the same weight, or none"
+            );
+            return Err(match &pos {
+                Some(a) => a.err(message),
+                None => p.err(message),
+            });
+        }
+    }
+    Ok(())
 }
 
 /// Mitsuba's table of named indices of refraction (`int_ior="water"`), the values Mitsuba 3

@@ -801,11 +801,11 @@ fn number(text: &str) -> Option<f32> {
     text.trim().parse().ok()
 }
 
-/// Numbers separated by commas and/or white space.
-/// The pairs of a `<spectrum value="400:0.1, 500:0.4, ...">`, or what they must be.
+/// The pairs of a `<spectrum value="400:0.1, 500:0.4, ...">`, separated by commas and/or
+/// white space as Mitsuba's tokenizer separates them, or what they must be.
 fn spectrum_pairs(text: &str) -> std::result::Result<Vec<[f64; 2]>, String> {
     let mut pairs: Vec<[f64; 2]> = Vec::new();
-    for item in text.split(',').map(str::trim).filter(|t| !t.is_empty()) {
+    for item in text.split(|c: char| c == ',' || c.is_whitespace()).filter(|t| !t.is_empty()) {
         let pair = item.split_once(':').and_then(|(w, v)| {
             let (w, v) = (w.trim().parse::<f64>().ok()?, v.trim().parse::<f64>().ok()?);
             (w.is_finite() && v.is_finite()).then_some([w, v])
@@ -829,6 +829,7 @@ fn spectrum_pairs(text: &str) -> std::result::Result<Vec<[f64; 2]>, String> {
     Ok(pairs)
 }
 
+/// Numbers separated by commas and/or white space.
 fn numbers(text: &str) -> Option<Vec<f32>> {
     text.split(|c: char| c == ',' || c.is_whitespace())
         .filter(|t| !t.is_empty())
