@@ -109,33 +109,35 @@ fn free_flight(c: &mut Criterion) {
             })
         });
     }
-    // The guided flight, steered towards the zero-variance collision density at distance
-    // alpha 0.5 with a trained field, over the medium's delta tracking: against `delta` and
-    // `decomposition` above, what steering costs.
+    // The guided flight with a trained field over the medium's delta tracking, at the default
+    // distance alpha 0 and steered towards the zero-variance collision density at 0.5: against
+    // `delta` and `decomposition` above, what guiding a flight costs.
     let field = trained(&scene);
     let mut cache = FieldCache::with_direct(&field.field, field.direct.as_ref(), false);
-    let mut s = Sampler::new(5, 0, 0);
-    let mut counters = Counters::default();
-    let centre = Vec3A::new(0.0, 1.2, 0.0);
-    group.bench_function("guided-steered-delta", |b| {
-        b.iter(|| {
-            let dir = zerovar::math::uniform_sphere(s.next_2d());
-            let ray = Ray::new(centre, dir);
-            let t_max = scene.intersect(&ray, f32::INFINITY).map_or(10.0, |h| h.t);
-            black_box(guided_flight(
-                medium,
-                Tracker::Delta,
-                &ray,
-                t_max,
-                Vec3A::ONE,
-                0.5,
-                None,
-                &mut cache,
-                &mut s,
-                &mut counters,
-            ))
-        })
-    });
+    for (label, alpha) in [("guided-default-delta", 0.0), ("guided-steered-delta", 0.5)] {
+        let mut s = Sampler::new(5, 0, 0);
+        let mut counters = Counters::default();
+        let centre = Vec3A::new(0.0, 1.2, 0.0);
+        group.bench_function(label, |b| {
+            b.iter(|| {
+                let dir = zerovar::math::uniform_sphere(s.next_2d());
+                let ray = Ray::new(centre, dir);
+                let t_max = scene.intersect(&ray, f32::INFINITY).map_or(10.0, |h| h.t);
+                black_box(guided_flight(
+                    medium,
+                    Tracker::Delta,
+                    &ray,
+                    t_max,
+                    Vec3A::ONE,
+                    alpha,
+                    None,
+                    &mut cache,
+                    &mut s,
+                    &mut counters,
+                ))
+            })
+        });
+    }
     group.finish();
 }
 
