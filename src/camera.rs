@@ -60,8 +60,13 @@ impl Camera {
     }
 
     /// The camera as Mitsuba's thin lens of aperture radius `aperture` (0 keeps the pinhole),
-    /// in focus at distance `focus` along the view axis (positive).
+    /// in focus at distance `focus` along the view axis. Panics unless the aperture is 0 or
+    /// the focus is finite and positive (scenes check both when they are built).
     pub fn with_lens(self, aperture: f32, focus: f32) -> Self {
+        assert!(
+            aperture == 0.0 || (aperture > 0.0 && focus > 0.0 && focus.is_finite()),
+            "a thin lens needs an aperture of 0 or more and a finite focus above 0"
+        );
         Self { aperture, focus, ..self }
     }
 
@@ -195,6 +200,7 @@ mod tests {
         // The focal plane is z = 2 (3 in front of the eye along -z).
         let focus = axis.at((axis.origin.z - 2.0) / -axis.direction.z);
         let mut sampler = Sampler::new(1, 2, 3);
+        let (mut spread, mut widest) = (0.0f32, 0.0f32);
         for _ in 0..100 {
             let (ray, reach) = lens.ray_and_reach(film, sampler.next_2d());
             assert!((ray.origin.z - 4.9).abs() < 1e-5, "on the near plane: {}", ray.origin);
@@ -202,9 +208,13 @@ mod tests {
             assert!((ray.at(t) - focus).length() < 1e-4, "{} vs {focus}", ray.at(t));
             // Back on the lens plane (z = 5) the ray starts within the aperture.
             let back = ray.at(-0.1 / -ray.direction.z);
-            assert!(((back - Vec3A::new(0.0, 0.0, 5.0)).length()) <= 0.25 + 1e-5, "{back}");
+            let off = (back - Vec3A::new(0.0, 0.0, 5.0)).length();
+            assert!(off <= 0.25 + 1e-5, "{back}");
+            (spread, widest) = (spread + off * off / 100.0, widest.max(off));
             assert!((ray.at(reach).z - (5.0 - 100.0)).abs() < 1e-2, "far plane: {reach}");
         }
+        // Uniform over the aperture: the mean squared distance from its centre is r^2 / 2.
+        assert!((spread / (0.25 * 0.25) - 0.5).abs() < 0.15 && widest > 0.2, "{spread} {widest}");
         // The lens's centre is the pinhole.
         assert!((lens.ray(film).direction - axis.direction).length() < 1e-6);
     }

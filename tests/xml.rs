@@ -1687,6 +1687,10 @@ fn thin_lens_spaced_spectra_and_sampling_weights() {
         ("\"thinlens\"><float name=\"aperture_radius\" value=\"0.1\"/>", "\"perspective\">");
     let s = xml("lens.xml", &scene(lens, &area("2")), &[]).unwrap_or_else(|e| panic!("{e}"));
     assert!(s.camera().has_lens());
+    // Mitsuba reads a focus distance on a pinhole too, and ignores it.
+    let focused = "\"perspective\"><float name=\"focus_distance\" value=\"3\"/>";
+    let s = xml("focus.xml", &scene(focused, &area("2")), &[]).unwrap_or_else(|e| panic!("{e}"));
+    assert!(!s.camera().has_lens());
     let e = xml("lens-bad.xml", &scene("\"thinlens\">", ""), &[]).unwrap_err().to_string();
     assert!(e.contains("lens-bad.xml:1:") && e.contains("aperture_radius"), "{e}");
     let e = xml("weights.xml", &scene(pinhole, &area("3")), &[]).unwrap_err().to_string();

@@ -55,6 +55,11 @@ impl Bitmap {
         self.mean
     }
 
+    /// The smallest value of any channel.
+    pub fn min(&self) -> f32 {
+        self.texels.iter().map(|t| t.min_element()).fold(f32::INFINITY, f32::min)
+    }
+
     /// The largest value of any channel.
     pub fn max(&self) -> f32 {
         self.texels.iter().map(|t| t.max_element()).fold(0.0, f32::max)

@@ -61,8 +61,10 @@ impl Roughness {
         match self {
             Roughness::Constant(m) => *m,
             Roughness::Textured { kind, alpha_u, alpha_v } => {
-                let u = alpha_u.eval_1(uv);
-                let v = alpha_v.as_ref().map_or(u, |t| t.eval_1(uv));
+                // Scenes check their textures against the least roughness; this keeps a map
+                // built in code from reaching the distribution with 0.
+                let u = alpha_u.eval_1(uv).max(MIN_ALPHA);
+                let v = alpha_v.as_ref().map_or(u, |t| t.eval_1(uv).max(MIN_ALPHA));
                 Microfacet { kind: *kind, alpha_u: u, alpha_v: v }
             }
         }

@@ -796,13 +796,14 @@ fn bitmap(cx: &Ctx<'_>, d: &BitmapDesc, most: Option<f32>) -> Result<Texture> {
         return cx.err(format!("{}: the image is empty", file.display()));
     };
     let max = b.max();
-    if max.is_nan() || b.mean().min_element() < 0.0 || !b.mean().is_finite() {
+    let min = b.min();
+    if max.is_nan() || min.is_nan() || min < 0.0 || !b.mean().is_finite() {
         return cx.err(format!("{}: texel values must be finite and non-negative", file.display()));
     }
     if let Some(most) = most.filter(|&m| max > m) {
         return cx.err(format!(
-            "{}: texel values reach {max}; a reflectance lies in [0, {most}] (scale the image, \
-             or save it as PNG)",
+            "{}: texel values reach {max}; a reflectance or opacity lies in [0, {most}] (scale \
+             the image, or save it as PNG)",
             file.display()
         ));
     }

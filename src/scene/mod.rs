@@ -358,7 +358,7 @@ impl Scene {
     /// for anisotropic BSDFs; any frame about the normal where that derivative vanishes.
     pub fn tangent_frame(&self, hit: &SurfaceHit) -> Frame {
         let n = hit.ns;
-        let dp = self.shapes[hit.shape as usize].tangent(hit.prim, hit.p);
+        let dp = self.shapes[hit.shape as usize].tangent(hit.prim, hit.p, hit.ng);
         match (dp - n * n.dot(dp)).try_normalize() {
             Some(s) => Frame { x: s, y: n.cross(s), z: n },
             None => Frame::from_z(n),

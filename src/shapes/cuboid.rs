@@ -128,18 +128,14 @@ impl Cuboid {
         (self.to_world.point(q), n, n, uv)
     }
 
-    /// Along the `u` axis of the face `p` lies on (the face whose plane it is nearest).
-    pub(super) fn tangent(&self, p: Vec3A) -> Vec3A {
+    /// Along the `u` axis of the face hit at `p` with geometric normal `ng` (either side):
+    /// the normal names the face's axis even at an edge, where the point alone could name
+    /// either face, and the point names its side.
+    pub(super) fn tangent(&self, p: Vec3A, ng: Vec3A) -> Vec3A {
+        let along = |face: usize| self.normals[face].dot(ng).abs();
+        let axis = (0..3).max_by(|&a, &b| along(2 * a).total_cmp(&along(2 * b))).unwrap_or(0);
         let q = self.to_world.inv_point(p);
-        let a = q.abs();
-        let axis = if a.x >= a.y && a.x >= a.z {
-            0
-        } else if a.y >= a.z {
-            1
-        } else {
-            2
-        };
-        let (_, u, _) = face_axes(axis, q[axis].signum());
+        let (_, u, _) = face_axes(axis, if q[axis] > 0.0 { 1.0 } else { -1.0 });
         self.to_world.vector(u)
     }
 

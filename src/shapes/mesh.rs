@@ -316,15 +316,15 @@ impl Mesh {
     }
 
     /// Triangle `i`'s derivative of the position along `u`: from its texture coordinates, or
-    /// along its first edge (Mitsuba's barycentric parameterization) without them; zero where
-    /// the texture coordinates are degenerate.
+    /// along its first edge (Mitsuba's barycentric parameterization) without them or where
+    /// they are degenerate, as Mitsuba keeps it there.
     pub(super) fn tangent(&self, i: u32) -> Vec3A {
         let (p0, p1, p2) = self.vertices(i);
         let Some(t) = &self.uvs else { return p1 - p0 };
         let [a, b, c] = self.indices[i as usize];
         let (d0, d1) = (t[b as usize] - t[a as usize], t[c as usize] - t[a as usize]);
         let det = d0.x * d1.y - d0.y * d1.x;
-        if det == 0.0 { Vec3A::ZERO } else { ((p1 - p0) * d1.y - (p2 - p0) * d0.y) / det }
+        if det == 0.0 { p1 - p0 } else { ((p1 - p0) * d1.y - (p2 - p0) * d0.y) / det }
     }
 
     /// A uniformly distributed point on the mesh and the triangle's geometric normal.

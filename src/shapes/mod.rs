@@ -141,14 +141,15 @@ impl Geometry {
     }
 
     /// The derivative of the position along `u` (its direction; zero where there is none) at
-    /// point `p` on primitive `i`, as Mitsuba 3 parameterizes each shape: the direction a
-    /// brushed (anisotropic) surface's tangent follows.
-    pub fn tangent(&self, i: u32, p: Vec3A) -> Vec3A {
+    /// point `p` on primitive `i`, whose geometric normal there is `ng` (either side), as
+    /// Mitsuba 3 parameterizes each shape: the direction a brushed (anisotropic) surface's
+    /// tangent follows.
+    pub fn tangent(&self, i: u32, p: Vec3A, ng: Vec3A) -> Vec3A {
         match self {
             Geometry::Sphere(s) => s.tangent(p),
             Geometry::Disk(d) => d.tangent(p),
             Geometry::Cylinder(c) => c.tangent(p),
-            Geometry::Cuboid(c) => c.tangent(p),
+            Geometry::Cuboid(c) => c.tangent(p, ng),
             Geometry::Parallelogram(r) => r.tangent(),
             Geometry::Mesh(m) => m.tangent(i),
         }
@@ -223,14 +224,15 @@ mod tests {
     use crate::transform::Transform;
     use glam::Vec3;
 
-    /// The nearest hit of `ray` on any primitive of `g`: its primitive, point and uv.
-    fn hit(g: &Geometry, ray: &Ray) -> Option<(u32, Vec3A, Vec2)> {
+    /// The nearest hit of `ray` on any primitive of `g`: its primitive, point, geometric
+    /// normal and uv.
+    fn hit(g: &Geometry, ray: &Ray) -> Option<(u32, Vec3A, Vec3A, Vec2)> {
         let n = g.primitive_count() as u32;
         let (i, h) = (0..n)
             .filter_map(|i| g.intersect(i, ray, f32::INFINITY).map(|h| (i, h)))
             .min_by(|a, b| a.1.t.total_cmp(&b.1.t))?;
-        let (p, _, _, uv) = g.surface(i, ray, h);
-        Some((i, p, uv))
+        let (p, ng, _, uv) = g.surface(i, ray, h);
+        Some((i, p, ng, uv))
     }
 
     /// `tangent` points along the derivative of the position in `u`, for every kind of shape
@@ -276,10 +278,11 @@ mod tests {
                 let dir = crate::math::uniform_sphere(s.next_2d());
                 let target = centre + 0.3 * (crate::math::uniform_sphere(s.next_2d()));
                 let ray = Ray::new(target + 6.0 * dir, -dir);
-                let Some((i, p, uv)) = hit(g, &ray) else { continue };
+                let Some((i, p, ng, uv)) = hit(g, &ray) else { continue };
                 let f = Frame::from_z(ray.direction);
                 let step = |e: Vec3A| hit(g, &Ray::new(ray.origin + 1e-3 * e, ray.direction));
-                let (Some((i1, p1, uv1)), Some((i2, p2, uv2))) = (step(f.x), step(f.y)) else {
+                let (Some((i1, p1, _, uv1)), Some((i2, p2, _, uv2))) = (step(f.x), step(f.y))
+                else {
                     continue;
                 };
                 let (du1, du2) = (uv1 - uv, uv2 - uv);
@@ -296,7 +299,7 @@ mod tests {
                     continue;
                 }
                 let dp_du = ((p1 - p) * du2.y - (p2 - p) * du1.y) / det;
-                let t = g.tangent(i, p);
+                let t = g.tangent(i, p, ng);
                 let cos = t.normalize().dot(dp_du.normalize());
                 assert!(cos > 0.995, "{name} at {p}: tangent {t} against dp/du {dp_du}");
                 checked += 1;

@@ -129,6 +129,8 @@ fn camera(conv: &mut Conv, o: &Rc<Object>) -> Result<(toml::Spanned<CameraDesc>,
         };
         (r, p.float("focus_distance")?)
     } else {
+        // Mitsuba reads it for every projective camera; a pinhole has no use for it.
+        p.float("focus_distance")?;
         (0.0, None)
     };
     let fov = p.float("fov")?;

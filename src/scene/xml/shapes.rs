@@ -284,7 +284,6 @@ pub(super) fn light(conv: &Conv, o: &Rc<Object>) -> Result<Spanned<LightDesc>> {
     let to_world = |p: &Props<'_>| -> Result<Option<crate::transform::Transform>> {
         p.transform("to_world")?.map(|s| compose(s, &o.pos, "to_world")).transpose()
     };
-    sampling_weight(conv, &p)?;
     match o.kind.as_str() {
         "point" => {
             d.intensity = p.color("intensity")?.or(one);
@@ -327,15 +326,15 @@ pub(super) fn light(conv: &Conv, o: &Rc<Object>) -> Result<Spanned<LightDesc>> {
             return Err(p.err(format!("unknown or unsupported emitter `{other}`; use {EMITTERS}")));
         }
     }
+    sampling_weight(conv, &p)?;
     p.finish()?;
     Ok(spanned(&o.pos, d))
 }
 
 /// An emitter's `sampling_weight`, Mitsuba's share of next-event estimates for it. Weights
 /// that are all equal change nothing in Mitsuba's image and are accepted (zerovar picks lights
-/// by its own rule). Unequal ones change Mitsuba 3.9.1's image, not only its noise (its mean
-/// by a fifth on a test scene, docs/experiments.md), which zerovar does not reproduce: they
-/// are an error.
+/// by its own rule). Unequal ones change Mitsuba 3.9.1's image, not only its noise
+/// (docs/experiments.md, 2026-12-07), which zerovar does not reproduce: they are an error.
 fn sampling_weight(conv: &Conv, p: &Props<'_>) -> Result<()> {
     let given = p.float("sampling_weight")?;
     let pos = p.raw("sampling_weight").map(|prop| prop.pos.clone());

@@ -811,7 +811,12 @@ fn spectrum_pairs(text: &str) -> std::result::Result<Vec<[f64; 2]>, String> {
             (w.is_finite() && v.is_finite()).then_some([w, v])
         });
         let Some(pair) = pair else {
-            return Err(format!("wavelength:value pairs of numbers (nm), not `{item}`"));
+            let hint = if item.starts_with(':') || item.ends_with(':') {
+                " (no space around the `:`, as Mitsuba's tokenizer splits there)"
+            } else {
+                ""
+            };
+            return Err(format!("wavelength:value pairs of numbers (nm), not `{item}`{hint}"));
         };
         if let Some(last) = pairs.last()
             && pair[0] <= last[0]
