@@ -96,31 +96,12 @@ impl Microfacet {
         self.alpha_u != self.alpha_v
     }
 
-    /// The density of micro-normals per unit projected area, D(m).
+    /// The density of micro-normals per unit projected area, D(m): the squared slope is scaled
+    /// by the roughness along each axis.
     pub fn d(&self, m: Vec3A) -> f32 {
         if m.z <= 0.0 {
             return 0.0;
         }
-        if self.is_anisotropic() {
-            return self.d_anisotropic(m);
-        }
-        let alpha = self.alpha_u;
-        let (a2, c2) = (alpha * alpha, m.z * m.z);
-        let s2 = m.x * m.x + m.y * m.y;
-        let d = match self.kind {
-            MicrofacetKind::Beckmann => {
-                (-s2 / (c2 * a2)).exp() / (std::f32::consts::PI * a2 * c2 * c2)
-            }
-            MicrofacetKind::Ggx => {
-                let t = s2 / a2 + c2;
-                1.0 / (std::f32::consts::PI * a2 * t * t)
-            }
-        };
-        if d.is_finite() && d * m.z > 1e-20 { d } else { 0.0 }
-    }
-
-    /// [`Self::d`] with two roughnesses: the squared slope is scaled per axis.
-    fn d_anisotropic(&self, m: Vec3A) -> f32 {
         let (au, av, c2) = (self.alpha_u, self.alpha_v, m.z * m.z);
         let e = (m.x / au).powi(2) + (m.y / av).powi(2);
         let d = match self.kind {
@@ -142,13 +123,9 @@ impl Microfacet {
             return 0.0;
         }
         // The roughness seen along v's azimuth, squared, times tan^2.
-        let a2_tan2 = if self.is_anisotropic() {
-            let (au, av) = (f64::from(self.alpha_u), f64::from(self.alpha_v));
-            (au * au * f64::from(v.x).powi(2) + av * av * f64::from(v.y).powi(2))
-                / f64::from(v.z).powi(2)
-        } else {
-            f64::from(self.alpha_u).powi(2) * s2 / f64::from(v.z).powi(2)
-        };
+        let (au, av) = (f64::from(self.alpha_u), f64::from(self.alpha_v));
+        let a2_tan2 = (au * au * f64::from(v.x).powi(2) + av * av * f64::from(v.y).powi(2))
+            / f64::from(v.z).powi(2);
         match self.kind {
             MicrofacetKind::Ggx => 0.5 * ((1.0 + a2_tan2).sqrt() - 1.0),
             MicrofacetKind::Beckmann => {
