@@ -696,6 +696,34 @@ fn small(path: &str, extra: &[(&str, &str)]) -> Scene {
 }
 
 #[test]
+fn measured_trackers_leave_the_scene_as_it_was() {
+    let mut scene = small(
+        "scenes/cloud.toml",
+        &[
+            ("resolution = [320, 200]", "resolution = [64, 40]"),
+            ("max_depth = 64", "max_depth = 8"),
+        ],
+    );
+    let before = scene.trackers().to_vec();
+    let trials = zerovar::render::measure_trackers(&mut scene, 0, 0.5, Some(2)).unwrap();
+    assert_eq!(scene.trackers(), &before[..]);
+    let names: Vec<_> = trials.iter().map(|t| t.tracker).collect();
+    assert_eq!(names, zerovar::tracking::candidates(&scene.media()[0]));
+    for t in &trials {
+        assert!(t.efficiency().is_finite() && t.efficiency() > 0.0, "{t:?}");
+        assert!(t.trimmed_relative_variance <= t.relative_variance, "{t:?}");
+    }
+    let [delta, weighted, decomposition, _] = trials[..] else { panic!("{trials:?}") };
+    // Where the majorants bound, weighted delta tracking draws what delta tracking draws (its
+    // weights differ from 1 by rounding only).
+    let (d, w) = (delta.relative_variance, weighted.relative_variance);
+    assert!((d - w).abs() <= 1e-6 * d, "{d} against {w}");
+    // The control takes collisions without a lookup wherever the cloud's minorant is above 0.
+    assert!(decomposition.lookups_per_path < delta.lookups_per_path, "{trials:?}");
+    assert_ne!(delta.relative_variance, decomposition.relative_variance);
+}
+
+#[test]
 fn cloud_images_agree_with_delta_tracking() {
     let mut scene = small("scenes/cloud.toml", &[("max_depth = 64", "max_depth = 16")]);
     let trackers = [

@@ -111,6 +111,13 @@ fn renders_a_scene_with_outputs_and_stats() {
     let o = zerovar(&["check", scene.to_str().unwrap()]);
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success() && out.contains("delta tracking"), "{out}");
+    // Measured trackers: a table per heterogeneous medium; a budget of 0 is refused.
+    let o = zerovar(&["check", repo("scenes/cloud.toml").to_str().unwrap(), "--trackers", "0.2"]);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success() && out.contains("trackers on `cloud`"), "{out}");
+    assert!(out.contains("weighted-decomposition"), "{out}");
+    let o = zerovar(&["check", repo("scenes/cloud.toml").to_str().unwrap(), "--trackers", "0"]);
+    assert!(!o.status.success() && stderr(&o).contains("--trackers 0"), "{}", stderr(&o));
     // The README's first command works as written.
     let o = zerovar(&["check", repo("scenes/fog-sphere.toml").to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));

@@ -23,6 +23,7 @@ mod passes;
 mod select;
 mod settings;
 mod stats;
+mod trackers;
 mod training;
 
 pub use fireflies::{Firefly, FireflyReport};
@@ -35,6 +36,7 @@ pub use select::Selection;
 pub use select::TAIL_LIMIT;
 pub use settings::{SETTINGS, Setting, SettingError, TRAIN_BUDGET, setting};
 pub use stats::{RenderStats, TrainingStats};
+pub use trackers::{TrackerTrial, measure_trackers};
 pub use training::{TrainingReport, TrainingStop};
 
 use combine::{combine_training, pixel_estimates};

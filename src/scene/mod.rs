@@ -320,6 +320,13 @@ impl Scene {
         Ok(())
     }
 
+    /// Sets medium `i`'s tracker, which the caller knows can handle it
+    /// ([`crate::tracking::candidates`]).
+    pub(crate) fn set_medium_tracker(&mut self, i: usize, tracker: Tracker) {
+        debug_assert!(tracker.check(&self.media[i]).is_ok());
+        self.trackers[i] = tracker;
+    }
+
     /// The integrator settings and the defaults of a render.
     pub fn settings(&self) -> &RenderSettings {
         &self.settings

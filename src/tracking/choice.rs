@@ -103,11 +103,13 @@ impl Tracker {
             Tracker::Delta => {
                 "auto: heterogeneous and grey; delta tracking on the bound grid's cells (at \
                  equal time it beat decomposition on every grid measured: the control's \
-                 exponential per cell costs more than the lookups it saves)"
+                 exponential per cell costs more than the lookups it saves; `check --trackers` \
+                 measures it on this scene)"
             }
             _ => {
                 "auto: heterogeneous and chromatic, so spectral tracking (history-aware, \
-                 bounded weights); without decomposition, which did not pay on any grid measured"
+                 bounded weights); without decomposition, which did not pay on any grid \
+                 measured (`check --trackers` measures it on this scene)"
             }
         }
     }
@@ -121,6 +123,25 @@ impl TrackerChoice {
             TrackerChoice::Force(t) => {
                 t.check(medium).map(|()| *t).map_err(TrackerError::Inapplicable)
             }
+        }
+    }
+}
+
+/// The trackers worth measuring against each other on `medium` (`zerovar check --trackers`):
+/// none for homogeneous media, whose closed forms are exact; delta, weighted delta and both
+/// decompositions for grey grids; spectral tracking and spectral decomposition for chromatic
+/// ones.
+pub fn candidates(medium: &Medium) -> Vec<Tracker> {
+    match (&medium.kind, medium.is_chromatic()) {
+        (MediumKind::Homogeneous { .. }, _) => Vec::new(),
+        (MediumKind::Heterogeneous(_), false) => vec![
+            Tracker::Delta,
+            Tracker::WeightedDelta,
+            Tracker::Decomposition,
+            Tracker::WeightedDecomposition,
+        ],
+        (MediumKind::Heterogeneous(_), true) => {
+            vec![Tracker::Spectral, Tracker::SpectralDecomposition]
         }
     }
 }

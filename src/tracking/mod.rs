@@ -28,7 +28,7 @@ mod estimators;
 mod steer;
 
 pub(crate) use choice::explain;
-pub use choice::{TrackerChoice, TrackerError};
+pub use choice::{TrackerChoice, TrackerError, candidates};
 pub use estimators::{SpectralEvent, SpectralProbabilities};
 pub use steer::{Steer, Tentative, Unsteered};
 

@@ -217,6 +217,11 @@ struct SceneArgs {
 struct CheckArgs {
     #[command(flatten)]
     scene: SceneArgs,
+    /// Also measure, on each heterogeneous medium, every tracker that can handle it: unguided
+    /// renders with only that medium's tracker changed, about SECONDS of rendering per medium,
+    /// reported as efficiency relative to the tracker the scene uses there.
+    #[arg(long, value_name = "SECONDS", allow_negative_numbers = true)]
+    trackers: Option<f64>,
 }
 
 #[derive(Args)]
@@ -284,6 +289,12 @@ pub(crate) fn run() -> Result<()> {
             let mut scene = zerovar::scene::load(&a.scene.scene, &defines)?;
             scene.set_tracker(a.scene.tracker).map_err(|e| anyhow::anyhow!("--{e}"))?;
             print!("{}", scene.describe());
+            if let Some(seconds) = a.trackers {
+                if !(seconds > 0.0 && seconds.is_finite()) {
+                    bail!("--trackers {seconds}: give the seconds to spend per medium, above 0");
+                }
+                print_tracker_trials(&mut scene, seconds)?;
+            }
             Ok(())
         }
         CommandArgs::Render(a) => run_render(validate(a)?),
@@ -291,6 +302,39 @@ pub(crate) fn run() -> Result<()> {
         CommandArgs::Reference(a) => run_reference(a),
         CommandArgs::Compare(a) => run_compare(a),
     }
+}
+
+/// `check --trackers`: each heterogeneous medium's candidate trackers, measured.
+fn print_tracker_trials(scene: &mut zerovar::scene::Scene, seconds: f64) -> Result<()> {
+    for i in 0..scene.media().len() {
+        let own = scene.trackers()[i];
+        let trials = zerovar::render::measure_trackers(scene, i, seconds, None)?;
+        let Some(base) = trials.iter().find(|t| t.tracker == own.steerable()).copied() else {
+            continue;
+        };
+        println!(
+            "trackers on `{}` ({} unguided renders of {} spp each; efficiency = 1 / (relative \
+             variance x seconds) relative to {}, then without the worst 0.1% of pixels):",
+            scene.media()[i].name,
+            base.runs,
+            base.spp,
+            own.name()
+        );
+        for t in &trials {
+            println!(
+                "  {:<24} {:>5.2} {:>5.2}   relative variance {:.3e} ({:.3e}), {:.3} s per \
+                 render, {:.2} density lookups per path",
+                t.tracker.name(),
+                t.efficiency() / base.efficiency(),
+                t.trimmed_efficiency() / base.trimmed_efficiency(),
+                t.relative_variance,
+                t.trimmed_relative_variance,
+                t.seconds,
+                t.lookups_per_path,
+            );
+        }
+    }
+    Ok(())
 }
 
 fn validate_budget(b: &BudgetArgs, default_spp: u32) -> Result<Budget> {
