@@ -333,9 +333,28 @@ fn print_tracker_trials(scene: &mut zerovar::scene::Scene, seconds: f64) -> Resu
                 t.lookups_per_path,
             );
         }
+        let better = |t: &&zerovar::render::TrackerTrial| {
+            t.efficiency() > HINT_MARGIN * base.efficiency()
+                && t.trimmed_efficiency() > HINT_MARGIN * base.trimmed_efficiency()
+        };
+        if let Some(t) =
+            trials.iter().filter(better).max_by(|a, b| a.efficiency().total_cmp(&b.efficiency()))
+        {
+            println!(
+                "  hint: --tracker {} measures {:.2}x the efficiency of {} here",
+                t.tracker.name(),
+                t.efficiency() / base.efficiency(),
+                own.name()
+            );
+        }
     }
     Ok(())
 }
+
+/// How much more efficient a tracker must measure, with and without the worst pixels, before
+/// `check --trackers` suggests it: twice the 5-10% by which two measurements of one tracker
+/// on one scene differ on a 2-core machine (docs/experiments.md).
+const HINT_MARGIN: f64 = 1.2;
 
 fn validate_budget(b: &BudgetArgs, default_spp: u32) -> Result<Budget> {
     match (b.spp, b.time) {
