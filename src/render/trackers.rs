@@ -63,6 +63,19 @@ pub fn measure_trackers(
         return Ok(Vec::new());
     }
     let own = scene.trackers()[medium];
+    let trials = measure_each(scene, medium, &candidates, seconds, threads);
+    scene.set_medium_tracker(medium, own);
+    trials
+}
+
+/// What [`measure_trackers`] does, less restoring the medium's own tracker.
+fn measure_each(
+    scene: &mut Scene,
+    medium: usize,
+    candidates: &[Tracker],
+    seconds: f64,
+    threads: Option<usize>,
+) -> Result<Vec<TrackerTrial>, RenderError> {
     let options = |spp, seed| RenderOptions {
         threads,
         ..RenderOptions::unguided(Budget::Samples(spp), seed)
@@ -99,7 +112,6 @@ pub fn measure_trackers(
             }
         })
         .collect();
-    scene.set_medium_tracker(medium, own);
     Ok(trials)
 }
 

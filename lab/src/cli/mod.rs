@@ -306,19 +306,24 @@ pub(crate) fn run() -> Result<()> {
 
 /// `check --trackers`: each heterogeneous medium's candidate trackers, measured.
 fn print_tracker_trials(scene: &mut zerovar::scene::Scene, seconds: f64) -> Result<()> {
+    let mut measured = 0;
     for i in 0..scene.media().len() {
         let own = scene.trackers()[i];
         let trials = zerovar::render::measure_trackers(scene, i, seconds, None)?;
-        let Some(base) = trials.iter().find(|t| t.tracker == own.steerable()).copied() else {
+        // A forced tracker that is not a candidate (ray marching) is measured against delta.
+        let Some(base) =
+            trials.iter().find(|t| t.tracker == own.steerable()).or(trials.first()).copied()
+        else {
             continue;
         };
+        measured += 1;
         println!(
             "trackers on `{}` ({} unguided renders of {} spp each; efficiency = 1 / (relative \
              variance x seconds) relative to {}, then without the worst 0.1% of pixels):",
             scene.media()[i].name,
             base.runs,
             base.spp,
-            own.name()
+            base.tracker.name()
         );
         for t in &trials {
             println!(
@@ -344,9 +349,12 @@ fn print_tracker_trials(scene: &mut zerovar::scene::Scene, seconds: f64) -> Resu
                 "  hint: --tracker {} measures {:.2}x the efficiency of {} here",
                 t.tracker.name(),
                 t.efficiency() / base.efficiency(),
-                own.name()
+                base.tracker.name()
             );
         }
+    }
+    if measured == 0 {
+        println!("trackers: no heterogeneous medium, nothing to measure (closed forms are exact)");
     }
     Ok(())
 }
