@@ -29,7 +29,7 @@ use super::equiangular::Equiangular;
 use super::flight::{
     CUT, DirectStretch, direct_stretch, equiangular_share, exp, exp_m1, power_heuristic,
 };
-pub use super::flight::{ExtraCollision, GuidedEvent, GuidedFlight};
+pub use super::flight::{ExtraCollision, GuidedEvent, GuidedFlight, free_path_needs_extra};
 use super::plain_flight::plain_flight;
 use crate::lights::PointLight;
 use crate::math::{Ray, Spectrum, is_grey, luminance, positive};

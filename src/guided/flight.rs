@@ -3,7 +3,9 @@
 //! (`distance`) and the closed-form flight of grey homogeneous media (`plain_flight`).
 
 use super::RadianceCache;
-use crate::math::{Ray, Spectrum};
+use crate::lights::PointLight;
+use crate::math::{Ray, Spectrum, is_grey};
+use crate::media::{Medium, MediumKind};
 
 /// The guided stretch ends where the standard transmittance falls to exp(-CUT); beyond it the
 /// rare remaining collisions follow the standard exponential.
@@ -36,6 +38,37 @@ pub(super) fn equiangular_share(d: &DirectStretch, towards: bool) -> Option<f32>
 /// costs a shadow ray for little. The rule reads only the ray's own light, not the scene's
 /// size or brightness. Point lights always get one: the grid cannot see their `1 / r^2`.
 pub(super) const MIN_OWN_VARIANCE: f32 = 1.0;
+
+/// Whether an unguided flight along `ray` up to `t_max` through `medium` takes an extra
+/// collision aimed at `point_lights`: in grey homogeneous fog, only where its own collision
+/// would estimate some light's in-scattering with a relative variance above
+/// `MIN_OWN_VARIANCE` (1), as the sun's rule; elsewhere always. Near a light at distance `d`
+/// from the ray's stretch, nearest at `t`, that variance is about
+/// `exp(sigma t) / (2 pi sigma d) - 1`: the light's `1 / r^2` peak, of width `d`, against a
+/// collision density `sigma exp(-sigma t)`. The rule reads the ray alone in units of the mean
+/// free path, so it holds for any scene's scale; rays it passes keep a bounded variance.
+pub fn free_path_needs_extra(
+    medium: &Medium,
+    ray: &Ray,
+    t_max: f32,
+    point_lights: &[PointLight],
+) -> bool {
+    let MediumKind::Homogeneous { sigma_t, .. } = medium.kind else { return true };
+    if !is_grey(sigma_t) {
+        return true;
+    }
+    let sigma = sigma_t.x;
+    if sigma.is_nan() || sigma <= 0.0 {
+        return false; // no collisions, and nothing to estimate the light from
+    }
+    let end = t_max.min(CUT / sigma);
+    point_lights.iter().any(|light| {
+        let Some((start, stop)) = light.reach(ray, end) else { return false };
+        let t = (light.position - ray.origin).dot(ray.direction).max(start).min(stop);
+        let d = (light.position - ray.at(t)).length();
+        (sigma * t).exp() > (1.0 + MIN_OWN_VARIANCE) * std::f32::consts::TAU * sigma * d
+    })
+}
 
 /// Parts of the guided stretch an extra collision for delta lights picks among: finer than
 /// the segments, because its cache lookups are cheap (see [`RadianceCache::direct`]).
@@ -296,6 +329,74 @@ mod tests {
         assert_eq!(equiangular_share(&all, true), Some(EQUIANGULAR_SHARE));
         assert_eq!(equiangular_share(&stretch(sigma, 50.0, 60.0), true), Some(1.0));
         assert_eq!(equiangular_share(&stretch(sigma, 50.0, 60.0), false), None);
+    }
+
+    /// The relative variance of the free path's own estimate of a point light's single
+    /// scattering into `(0, end)` of a ray along +x, the light at distance `d` from it above
+    /// `t0`: `int f^2 / p / (int f)^2 - 1` by quadrature, for `f = exp(-sigma (t + r)) / r^2`
+    /// and `p = sigma exp(-sigma t)`.
+    fn own_variance(sigma: f64, d: f64, t0: f64, end: f64) -> f64 {
+        let f = |t: f64| {
+            let r2 = d * d + (t - t0) * (t - t0);
+            (-sigma * (t + r2.sqrt())).exp() / r2
+        };
+        let second = |t: f64| f(t) * f(t) / (sigma * (-sigma * t).exp());
+        let near = (t0 - 20.0 * d).max(0.0)..(t0 + 20.0 * d).min(end);
+        let integral = |g: &dyn Fn(f64) -> f64| {
+            zerovar_testkit::integrate_1d(g, 0.0, near.start, 2000)
+                + zerovar_testkit::integrate_1d(g, near.start, near.end, 4000)
+                + zerovar_testkit::integrate_1d(g, near.end, end, 2000)
+        };
+        integral(&second) / integral(&f).powi(2) - 1.0
+    }
+
+    /// Unguided flights skip the extra collision only where the free path's own estimate of
+    /// the point light is good: over extinctions of 0.05 to 2 and rays passing 0.01 to 3 from
+    /// the light, every ray the rule passes has a relative variance below 4 by quadrature,
+    /// every ray it takes one above 1, and every ray above 8 takes one. Spot lights the ray
+    /// does not reach, and media without collisions, never take one; chromatic media always.
+    #[test]
+    fn unguided_flights_take_extra_collisions_where_the_free_path_is_poor() {
+        let medium = |sigma_t: Spectrum| Medium {
+            name: "fog".into(),
+            kind: MediumKind::Homogeneous { sigma_t, albedo: Spectrum::splat(0.9) },
+            phase: crate::phase::PhaseFunction::Isotropic,
+            emission: Spectrum::ZERO,
+        };
+        let ray = Ray::new(Vec3A::ZERO, Vec3A::X);
+        let (mut taken, mut passed) = (0, 0);
+        for sigma in [0.05f32, 0.5, 2.0] {
+            let fog = medium(Spectrum::splat(sigma));
+            for d in [0.01f32, 0.1, 0.3, 1.0, 3.0] {
+                for t0 in [0.5f32, 2.0, 5.0] {
+                    let end = (CUT / sigma).min(50.0);
+                    if t0 >= end {
+                        continue;
+                    }
+                    let light = PointLight { position: Vec3A::new(t0, d, 0.0), cone: None };
+                    let takes = free_path_needs_extra(&fog, &ray, end, &[light]);
+                    let exact = own_variance(sigma.into(), d.into(), t0.into(), end.into());
+                    let what = format!("sigma {sigma}, d {d}, t0 {t0}: variance {exact:.2}");
+                    assert!(takes || exact < 4.0, "{what}, passed");
+                    assert!(!takes || exact > 1.0, "{what}, taken");
+                    if exact > 8.0 {
+                        assert!(takes, "{what}, passed");
+                    }
+                    if takes { taken += 1 } else { passed += 1 }
+                }
+            }
+        }
+        assert!(taken > 5 && passed > 5, "taken {taken}, passed {passed}");
+        let near = PointLight { position: Vec3A::new(2.0, 0.01, 0.0), cone: None };
+        let fog = medium(Spectrum::splat(0.5));
+        assert!(free_path_needs_extra(&fog, &ray, f32::INFINITY, &[near]));
+        // A spot light pointing away from the ray reaches none of it.
+        let away = PointLight { cone: Some((Vec3A::Y, 0.9)), ..near };
+        assert!(!free_path_needs_extra(&fog, &ray, f32::INFINITY, &[away]));
+        assert!(!free_path_needs_extra(&medium(Spectrum::ZERO), &ray, 10.0, &[near]));
+        let chromatic = medium(Spectrum::new(0.5, 1.0, 2.0));
+        let far = PointLight { position: Vec3A::new(2.0, 30.0, 0.0), cone: None };
+        assert!(free_path_needs_extra(&chromatic, &ray, 10.0, &[far]));
     }
 
     #[test]

@@ -1,6 +1,7 @@
 //! The unguided volumetric path tracer: the shared random walk (`walk`) with nothing guided.
 //!
-//! Free flights come from each medium's tracker; at every real scattering event (in a medium or
+//! Free flights come from each medium's tracker, with an extra collision aimed at point and
+//! spot lights where a flight passes close to one; at every real scattering event (in a medium or
 //! on a non-null surface) it samples one light and weighs it with the power heuristic against
 //! phase or BSDF sampling, then continues with phase or BSDF sampling. Null surfaces are
 //! crossed without counting a bounce, switching the current medium. Depth counts scattering
@@ -40,6 +41,7 @@ impl VolPath {
             surface_alpha: 0.0,
             distance_alpha: 0.0,
             collision_windows: false,
+            point_light_collisions: true,
         }
     }
 

@@ -5,17 +5,21 @@
 //! heuristic against phase or BSDF sampling, null surfaces crossed without a bounce, Mitsuba's
 //! depth counting and Russian roulette. Each guided component replaces one decision by its
 //! zero-variance counterpart mixed with the standard one (`guided`): distances, directions
-//! (product sampling) and roulette with splitting (weight windows); a guided flight may also
-//! return an extra collision where delta lights are estimated a second time, weighed against
-//! the estimate at its own collision (`guided::distance::guided_flight`). Split copies wait on
-//! a fixed-size stack, so a walk never allocates.
+//! (product sampling) and roulette with splitting (weight windows). A flight may also return
+//! an extra collision where delta lights are estimated a second time, weighed against the
+//! estimate at its own collision (`guided::distance::guided_flight`): a guided flight's is
+//! placed by the field and aimed at point lights, and an unguided flight aims one at point and
+//! spot lights alone, which needs no field. Split copies wait on a fixed-size stack, so a walk
+//! never allocates.
 
 use crate::accel::ShadowTrace;
 use crate::bsdf::Bsdf;
-use crate::guided::distance::{ExtraCollision, GuidedEvent, guided_flight};
+use crate::guided::distance::{
+    ExtraCollision, GuidedEvent, GuidedFlight, free_path_needs_extra, guided_flight,
+};
 use crate::guided::halo::{self, Halo};
 use crate::guided::{
-    Components, DirectRecord, EXACT_PRODUCT_MIN_G, PRODUCT_MIN_G, RadianceCache, window,
+    Components, DirectRecord, EXACT_PRODUCT_MIN_G, NoCache, PRODUCT_MIN_G, RadianceCache, window,
 };
 use crate::integrators::trace::{Continuation, LightSource, Strategy, Trace, TraceEvent};
 use crate::lights::Light;
@@ -81,6 +85,12 @@ pub struct WalkSettings {
     /// Weight windows also after each medium collision, before its next-event estimate
     /// (where roulette is guided), besides the one after each direction.
     pub collision_windows: bool,
+    /// Flights through a non-emissive medium take an extra collision aimed at the scene's
+    /// point and spot lights (equiangular sampling) even where distances are not guided, so
+    /// that next-event estimates near such a light have finite variance; in grey fog only
+    /// rays that pass close to a light in units of the mean free path
+    /// (`guided::distance::free_path_needs_extra`). On by default.
+    pub point_light_collisions: bool,
 }
 
 /// What the walk needs to know about the pixel and the training it feeds.
@@ -363,18 +373,25 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
     }
 
     /// The flight along the path's ray through medium `m` up to `t_max`: a guided flight with
-    /// its extra collision for delta lights when distances are guided, the medium's tracker
-    /// otherwise.
+    /// its extra collision for delta lights when distances are guided; otherwise the medium's
+    /// tracker, with an extra collision aimed at point and spot lights alone where the scene has
+    /// them ([`WalkSettings::point_light_collisions`]).
     fn flight(&mut self, s: &mut PathState, m: u32, t_max: f32, alpha: f32) -> Flown {
         let (scene, settings) = (self.scene, self.settings);
         let medium = &scene.media[m as usize];
         let guided = settings.guide.distances && alpha > 0.0;
+        // One past the last depth an extra collision would not estimate any light.
+        let lights_ahead = settings.max_depth.is_none_or(|d| s.depth + 1 < d);
+        let aims_at_points = settings.point_light_collisions
+            && lights_ahead
+            && !scene.point_lights.is_empty()
+            && !medium.is_emissive()
+            && free_path_needs_extra(medium, &s.ray, t_max, &scene.point_lights);
         let (scatter_t, weight, emitted, delta_share) = if guided {
             // Training paths take extra collisions too: their images are averaged into the
-            // result. One past the last depth would not estimate any light.
-            let extra_nee = (!scene.delta_lights.is_empty()
-                && settings.max_depth.is_none_or(|d| s.depth + 1 < d))
-            .then_some(&scene.point_lights[..]);
+            // result.
+            let extra_nee =
+                (!scene.delta_lights.is_empty() && lights_ahead).then_some(&scene.point_lights[..]);
             let distance_alpha = settings.distance_alpha.min(MAX_ALPHA);
             let f = guided_flight(
                 medium,
@@ -388,17 +405,29 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
                 self.sampler,
                 self.counters,
             );
-            s.guided_gain *= f.gain;
-            if let Some(extra) = f.extra {
-                self.extra_collision(s, medium, extra);
+            match self.flown(s, medium, f) {
+                Some(event) => event,
+                None => return Flown::Ended,
             }
-            match f.event {
-                GuidedEvent::Scatter { t } => (Some(t), f.weight, f.emitted, f.delta_share),
-                GuidedEvent::Pass => (None, f.weight, f.emitted, f.delta_share),
-                GuidedEvent::Absorb => {
-                    self.found(f.emitted, LightSource::MediumEmission, s.depth, s.beta, 0.0);
-                    return Flown::Ended;
-                }
+        } else if aims_at_points {
+            // Standard free paths, and the equiangular extra collision, which needs no field:
+            // without it, next-event estimates of a point light from collisions near it have
+            // infinite variance (docs/experiments.md). The field is not asked where to place it.
+            let f = guided_flight(
+                medium,
+                scene.trackers[m as usize],
+                &s.ray,
+                t_max,
+                s.beta,
+                0.0,
+                Some(&scene.point_lights[..]),
+                &mut NoCache,
+                self.sampler,
+                self.counters,
+            );
+            match self.flown(s, medium, f) {
+                Some(event) => event,
+                None => return Flown::Ended,
             }
         } else {
             let tracker = scene.trackers[m as usize];
@@ -423,6 +452,29 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
             Some(t) => Flown::Scattered { t, delta_share },
             None if s.beta.max_element() <= 0.0 => Flown::Ended,
             None => Flown::Passed,
+        }
+    }
+
+    /// What a flight from `guided_flight` leaves the walk: its collision (if any), weight,
+    /// emission and delta lights' share at the collision, after its extra collision is
+    /// estimated; `None` when it was absorbed (its emission then found).
+    fn flown(
+        &mut self,
+        s: &mut PathState,
+        medium: &Medium,
+        f: GuidedFlight,
+    ) -> Option<(Option<f32>, Spectrum, Spectrum, f32)> {
+        s.guided_gain *= f.gain;
+        if let Some(extra) = f.extra {
+            self.extra_collision(s, medium, extra);
+        }
+        match f.event {
+            GuidedEvent::Scatter { t } => Some((Some(t), f.weight, f.emitted, f.delta_share)),
+            GuidedEvent::Pass => Some((None, f.weight, f.emitted, f.delta_share)),
+            GuidedEvent::Absorb => {
+                self.found(f.emitted, LightSource::MediumEmission, s.depth, s.beta, 0.0);
+                None
+            }
         }
     }
 
