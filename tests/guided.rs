@@ -1378,7 +1378,7 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
     // roulette alone, are the only candidate (so both kinds of guided tiles are rendered
     // whatever the pilots choose).
     let without_roulette = Components { roulette: false, ..Components::FULL };
-    let mut tails = [0, 0];
+    let (mut tails, mut paid) = ([0, 0], 0);
     for (name, text) in SCENES {
         let s = scene(text);
         let reference = quadrant_means(&render_with(&s, Components::OFF, 0.0, 1024, 100));
@@ -1402,6 +1402,7 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
             assert_eq!(piloted, candidates.iter().collect::<Vec<_>>(), "{what}");
             let best = selection.candidates.iter().map(|c| c.1).fold(f64::MIN, f64::max);
             if best > 1.0 {
+                paid += 1;
                 assert!(
                     selection.candidates.iter().any(|c| c.0 == selection.components && c.1 == best),
                     "{what}: {selection:?}"
@@ -1417,6 +1418,7 @@ fn adaptive_guiding_converges_to_the_unguided_image() {
     }
     println!("pilots light-tailed / heavy-tailed: {tails:?}");
     assert!(tails[0] > 0 && tails[1] > 0, "both kinds of pilot must be seen: {tails:?}");
+    assert!(paid > 0, "no candidate paid anywhere, so no choice among them was checked");
 }
 
 #[test]

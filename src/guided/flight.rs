@@ -3,6 +3,7 @@
 //! (`distance`) and the closed-form flight of grey homogeneous media (`plain_flight`).
 
 use super::RadianceCache;
+use super::equiangular::MAX_POINT_LIGHTS;
 use crate::lights::PointLight;
 use crate::math::{Ray, Spectrum, is_grey};
 use crate::media::{Medium, MediumKind};
@@ -45,8 +46,10 @@ pub(super) const MIN_OWN_VARIANCE: f32 = 1.0;
 /// `MIN_OWN_VARIANCE` (1), as the sun's rule; elsewhere always. Near a light at distance `d`
 /// from the ray's stretch, nearest at `t`, that variance is about
 /// `exp(sigma t) / (2 pi sigma d) - 1`: the light's `1 / r^2` peak, of width `d`, against a
-/// collision density `sigma exp(-sigma t)`. The rule reads the ray alone in units of the mean
-/// free path, so it holds for any scene's scale; rays it passes keep a bounded variance.
+/// collision density `sigma exp(-sigma t)`. A light whose peak lies past the stretch an extra
+/// collision covers (`CUT` mean free paths) gets none. The rule reads the ray alone in units
+/// of the mean free path, so it holds for any scene's scale; rays it passes keep a bounded
+/// variance.
 pub fn free_path_needs_extra(
     medium: &Medium,
     ray: &Ray,
@@ -62,9 +65,16 @@ pub fn free_path_needs_extra(
         return false; // no collisions, and nothing to estimate the light from
     }
     let end = t_max.min(CUT / sigma);
-    point_lights.iter().any(|light| {
+    // The lights the extra collision would aim at (`Equiangular` takes the first of them).
+    point_lights.iter().take(MAX_POINT_LIGHTS).any(|light| {
         let Some((start, stop)) = light.reach(ray, end) else { return false };
-        let t = (light.position - ray.origin).dot(ray.direction).max(start).min(stop);
+        let foot = (light.position - ray.origin).dot(ray.direction);
+        if foot > stop && stop < t_max {
+            // Its peak lies past the stretch, which the standard tail covers: within the
+            // stretch its light is at least exp(-CUT) of what it is there.
+            return false;
+        }
+        let t = foot.max(start).min(stop);
         let d = (light.position - ray.at(t)).length();
         (sigma * t).exp() > (1.0 + MIN_OWN_VARIANCE) * std::f32::consts::TAU * sigma * d
     })
@@ -354,7 +364,8 @@ mod tests {
     /// the point light is good: over extinctions of 0.05 to 2 and rays passing 0.01 to 3 from
     /// the light, every ray the rule passes has a relative variance below 4 by quadrature,
     /// every ray it takes one above 1, and every ray above 8 takes one. Spot lights the ray
-    /// does not reach, and media without collisions, never take one; chromatic media always.
+    /// does not reach, lights past the stretch, and media without collisions, never take one;
+    /// chromatic media always.
     #[test]
     fn unguided_flights_take_extra_collisions_where_the_free_path_is_poor() {
         let medium = |sigma_t: Spectrum| Medium {
@@ -394,6 +405,16 @@ mod tests {
         let away = PointLight { cone: Some((Vec3A::Y, 0.9)), ..near };
         assert!(!free_path_needs_extra(&fog, &ray, f32::INFINITY, &[away]));
         assert!(!free_path_needs_extra(&medium(Spectrum::ZERO), &ray, 10.0, &[near]));
+        // A light past the stretch's cut (8 mean free paths) gets none; one as near past a
+        // surface that ends the ray sooner, where the stretch ends, does.
+        let beyond = PointLight { position: Vec3A::new(16.5, 0.01, 0.0), cone: None };
+        assert!(!free_path_needs_extra(&fog, &ray, f32::INFINITY, &[beyond]));
+        let at_wall = PointLight { position: Vec3A::new(4.5, 0.01, 0.0), cone: None };
+        assert!(free_path_needs_extra(&fog, &ray, 4.0, &[at_wall]));
+        // Only the lights an extra collision would aim at count.
+        let mut many = vec![PointLight { position: Vec3A::new(2.0, 30.0, 0.0), cone: None }; 8];
+        many.push(near);
+        assert!(!free_path_needs_extra(&fog, &ray, f32::INFINITY, &many));
         let chromatic = medium(Spectrum::new(0.5, 1.0, 2.0));
         let far = PointLight { position: Vec3A::new(2.0, 30.0, 0.0), cone: None };
         assert!(free_path_needs_extra(&chromatic, &ray, 10.0, &[far]));

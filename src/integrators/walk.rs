@@ -374,28 +374,24 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
 
     /// The flight along the path's ray through medium `m` up to `t_max`: a guided flight with
     /// its extra collision for delta lights when distances are guided; otherwise the medium's
-    /// tracker, with an extra collision aimed at point and spot lights alone where the scene has
-    /// them ([`WalkSettings::point_light_collisions`]).
+    /// tracker, with an extra collision aimed at point and spot lights alone where the ray
+    /// passes close to one ([`WalkSettings::point_light_collisions`]).
     fn flight(&mut self, s: &mut PathState, m: u32, t_max: f32, alpha: f32) -> Flown {
         let (scene, settings) = (self.scene, self.settings);
         let medium = &scene.media[m as usize];
         let guided = settings.guide.distances && alpha > 0.0;
         // One past the last depth an extra collision would not estimate any light.
         let lights_ahead = settings.max_depth.is_none_or(|d| s.depth + 1 < d);
-        let aims_at_points = settings.point_light_collisions
-            && lights_ahead
-            && !scene.point_lights.is_empty()
-            && !medium.is_emissive()
-            && free_path_needs_extra(medium, &s.ray, t_max, &scene.point_lights);
-        let (scatter_t, weight, emitted, delta_share) = if guided {
+        let tracker = scene.trackers[m as usize];
+        let with_extra = if guided {
             // Training paths take extra collisions too: their images are averaged into the
             // result.
             let extra_nee =
                 (!scene.delta_lights.is_empty() && lights_ahead).then_some(&scene.point_lights[..]);
             let distance_alpha = settings.distance_alpha.min(MAX_ALPHA);
-            let f = guided_flight(
+            Some(guided_flight(
                 medium,
-                scene.trackers[m as usize],
+                tracker,
                 &s.ray,
                 t_max,
                 s.beta,
@@ -404,40 +400,53 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
                 self.ctx.cache,
                 self.sampler,
                 self.counters,
-            );
-            match self.flown(s, medium, f) {
-                Some(event) => event,
-                None => return Flown::Ended,
-            }
-        } else if aims_at_points {
+            ))
+        } else if settings.point_light_collisions
+            && lights_ahead
+            && !scene.point_lights.is_empty()
+            && !medium.is_emissive()
+            && free_path_needs_extra(medium, &s.ray, t_max, &scene.point_lights)
+        {
             // Standard free paths, and the equiangular extra collision, which needs no field:
             // without it, next-event estimates of a point light from collisions near it have
             // infinite variance (docs/experiments.md). The field is not asked where to place it.
-            let f = guided_flight(
+            let points = Some(&scene.point_lights[..]);
+            Some(guided_flight(
                 medium,
-                scene.trackers[m as usize],
+                tracker,
                 &s.ray,
                 t_max,
                 s.beta,
                 0.0,
-                Some(&scene.point_lights[..]),
+                points,
                 &mut NoCache,
                 self.sampler,
                 self.counters,
-            );
-            match self.flown(s, medium, f) {
+            ))
+        } else {
+            None
+        };
+        let (scatter_t, weight, emitted, delta_share) = match with_extra {
+            Some(f) => match self.flown(s, medium, f) {
                 Some(event) => event,
                 None => return Flown::Ended,
+            },
+            None => {
+                let f = sample_flight(
+                    medium,
+                    tracker,
+                    &s.ray,
+                    t_max,
+                    s.beta,
+                    self.sampler,
+                    self.counters,
+                );
+                let t = match f.event {
+                    FlightEvent::Scatter { t } => Some(t),
+                    FlightEvent::Escape => None,
+                };
+                (t, f.weight, f.emitted, 1.0)
             }
-        } else {
-            let tracker = scene.trackers[m as usize];
-            let f =
-                sample_flight(medium, tracker, &s.ray, t_max, s.beta, self.sampler, self.counters);
-            let t = match f.event {
-                FlightEvent::Scatter { t } => Some(t),
-                FlightEvent::Escape => None,
-            };
-            (t, f.weight, f.emitted, 1.0)
         };
         self.found(emitted, LightSource::MediumEmission, s.depth, s.beta, 0.0);
         trace(self.ctx, || TraceEvent::Flight {
