@@ -106,6 +106,7 @@ impl Equiangular {
 mod tests {
     use super::*;
     use glam::Vec3A;
+    use std::f32::consts::TAU;
     use zerovar_testkit::{chi2_1d, equal_mass_edges, integrate_1d};
 
     fn point(position: Vec3A) -> PointLight {
@@ -221,6 +222,46 @@ mod tests {
             if any { crossed += 1 } else { missed += 1 }
         }
         assert!(crossed > 400 && missed > 400, "crossed {crossed}, missed {missed}");
+    }
+
+    /// Rays through points well inside a narrow spot's cone (at least half a degree from its
+    /// edge) within 1e-4 to 0.1 of the apex, from 0.5 to 5 away: the part the light reaches
+    /// holds every such point. Near the apex the cone's interval along a ray is shorter than
+    /// single precision resolves at the ray's scale.
+    #[test]
+    fn a_spot_light_reaches_points_near_its_apex() {
+        let mut sampler = crate::rng::Sampler::new(9, 0, 0);
+        let mut u = || sampler.next_1d();
+        let position = Vec3A::new(1.1, 2.35, -1.2);
+        let axis = Vec3A::new(-0.6, -2.35, -1.0).normalize();
+        let cutoff = 12f32.to_radians();
+        let light = PointLight { position, cone: Some((axis, cutoff.cos())) };
+        let frame = crate::math::Frame::from_z(axis);
+        let mut checked = 0;
+        for _ in 0..20_000 {
+            let (theta, phi) = ((cutoff - 0.5f32.to_radians()) * u().sqrt(), TAU * u());
+            let local = Vec3A::new(theta.sin() * phi.cos(), theta.sin() * phi.sin(), theta.cos());
+            let point = position + 10f32.powf(-4.0 + 3.0 * u()) * frame.to_world(local);
+            let z = 2.0 * u() - 1.0;
+            let a = TAU * u();
+            let r = (1.0 - z * z).sqrt();
+            let direction = Vec3A::new(r * a.cos(), r * a.sin(), z);
+            let t = 0.5 + 4.5 * u();
+            let ray = Ray::new(point - t * direction, direction);
+            // The point as the walk computes it, checked as the light's cone is.
+            let to = ray.at(t) - position;
+            if to.dot(axis) < to.length() * (cutoff - 0.25f32.to_radians()).cos() {
+                continue;
+            }
+            checked += 1;
+            let reach = light.reach(&ray, 20.0);
+            assert!(
+                reach.is_some_and(|(a, b)| t >= a && t <= b),
+                "{ray:?}, t {t}, distance {}: {reach:?}",
+                to.length()
+            );
+        }
+        assert!(checked > 15_000, "{checked}");
     }
 
     #[test]

@@ -22,14 +22,18 @@ impl PointLight {
             return Some((0.0, end));
         };
         // Inside the forward cone: ((v + t d).a)^2 >= cos^2 |v + t d|^2 with (v + t d).a >= 0.
-        let v = ray.origin - self.position;
-        let (da, va) = (ray.direction.dot(axis), v.dot(axis));
-        let cos2 = cos_cutoff * cos_cutoff;
-        let a = da * da - cos2;
-        let b = 2.0 * (da * va - cos2 * ray.direction.dot(v));
+        // In double precision, and with |d|^2 as it is: near the apex the roots lie within
+        // the rounding of single precision of each other, and a |d| off 1 by one rounding moved
+        // them off points well inside the cone.
+        let (v, d) = ((ray.origin - self.position).as_dvec3(), ray.direction.as_dvec3());
+        let axis = axis.as_dvec3();
+        let (da, va) = (d.dot(axis), v.dot(axis));
+        let cos2 = f64::from(cos_cutoff) * f64::from(cos_cutoff);
+        let a = da * da - cos2 * d.length_squared();
+        let b = 2.0 * (da * va - cos2 * d.dot(v));
         let c = va * va - cos2 * v.length_squared();
         // The forward half-space of the apex.
-        let (mut lo, mut hi) = (0.0f32, end);
+        let (mut lo, mut hi) = (0.0f64, f64::from(end));
         if da > 0.0 {
             lo = lo.max(-va / da);
         } else if da < 0.0 {
@@ -67,8 +71,11 @@ impl PointLight {
                 hi = hi.min(r1);
             }
         }
-        let pad = 1e-4 * (hi - lo).abs().max(1e-3);
-        let (lo, hi) = ((lo - pad).max(0.0), (hi + pad).min(end));
+        // Wider by the rounding of points along the ray in single precision.
+        let length = if (hi - lo).is_finite() { (hi - lo).abs() } else { 0.0 };
+        let far = if hi.is_finite() { hi.abs() } else { lo.abs() };
+        let pad = 1e-4 * length.max(1e-3) + 1e-6 * (v.length() + far);
+        let (lo, hi) = ((lo - pad).max(0.0) as f32, (hi + pad).min(f64::from(end)) as f32);
         (hi > lo).then_some((lo, hi))
     }
 }
