@@ -69,7 +69,7 @@ pub fn free_path_needs_extra(
     point_lights.iter().take(MAX_POINT_LIGHTS).any(|light| {
         let Some((start, stop)) = light.reach(ray, end) else { return false };
         let foot = (light.position - ray.origin).dot(ray.direction);
-        if foot > stop && stop < t_max {
+        if foot > end && end < t_max {
             // Its peak lies past the stretch, which the standard tail covers: within the
             // stretch its light is at least exp(-CUT) of what it is there.
             return false;
@@ -365,7 +365,7 @@ mod tests {
     /// the light, every ray the rule passes has a relative variance below 4 by quadrature,
     /// every ray it takes one above 1, and every ray above 8 takes one. Spot lights the ray
     /// does not reach, lights past the stretch, and media without collisions, never take one;
-    /// chromatic media always.
+    /// a ray through a spot's cone near its apex does; chromatic media always.
     #[test]
     fn unguided_flights_take_extra_collisions_where_the_free_path_is_poor() {
         let medium = |sigma_t: Spectrum| Medium {
@@ -411,6 +411,13 @@ mod tests {
         assert!(!free_path_needs_extra(&fog, &ray, f32::INFINITY, &[beyond]));
         let at_wall = PointLight { position: Vec3A::new(4.5, 0.01, 0.0), cone: None };
         assert!(free_path_needs_extra(&fog, &ray, 4.0, &[at_wall]));
+        // A spot's cone may end before the ray's nearest point to it: what counts is how near
+        // the ray passes within the cone, not where the cone ends.
+        let axis = Vec3A::new(-1.0, -0.5, 0.0).normalize();
+        let apex = PointLight { position: Vec3A::new(2.0, 0.05, 0.0), cone: Some((axis, 0.7)) };
+        let (_, stop) = apex.reach(&ray, 16.0).expect("the ray crosses the cone");
+        assert!(stop < 2.0, "the cone ends at {stop}, before the foot");
+        assert!(free_path_needs_extra(&fog, &ray, f32::INFINITY, &[apex]));
         // Only the lights an extra collision would aim at count.
         let mut many = vec![PointLight { position: Vec3A::new(2.0, 30.0, 0.0), cone: None }; 8];
         many.push(near);
