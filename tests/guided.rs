@@ -12,6 +12,7 @@ use zerovar::guided::{Components, NoCache, RadianceCache};
 use zerovar::integrators::walk::{self, WalkContext, WalkSettings};
 use zerovar::math::{Ray, Spectrum, luminance};
 use zerovar::media::Medium;
+use zerovar::phase::PhaseFunction;
 use zerovar::render::{
     Budget, GuidingOptions, RenderOptions, RenderResult, TrainBudget, render, render_with_field,
 };
@@ -722,6 +723,124 @@ fn half_guided(guide: Components) -> WalkSettings {
     }
 }
 
+/// A cache whose guided distribution is the uniform sphere, at every vertex and surface.
+struct UniformSphere;
+
+impl RadianceCache for UniformSphere {
+    fn load(&mut self, _: Vec3A, _: f32) -> bool {
+        true
+    }
+    fn incident(&self, _: Vec3A) -> f32 {
+        1.0
+    }
+    fn mean_radiance(&self) -> f32 {
+        1.0
+    }
+    fn inscattered(&self, _: Vec3A, _: f32) -> f32 {
+        1.0
+    }
+    fn product_hg(&mut self, _: Vec3A, _: f32) -> bool {
+        true
+    }
+    fn product_cosine(&mut self, _: Vec3A) -> bool {
+        true
+    }
+    fn sample(&self, u: Vec2) -> Vec3A {
+        zerovar::math::uniform_sphere(u)
+    }
+    fn pdf(&self, _: Vec3A) -> f32 {
+        zerovar::math::INV_FOUR_PI
+    }
+    fn region_exit(&self, _: Vec3A, _: Vec3A) -> f32 {
+        f32::INFINITY
+    }
+}
+
+#[test]
+fn the_walk_uses_every_guided_share_as_given() {
+    use zerovar::integrators::trace::{Strategy, Trace, TraceEvent};
+    // Hazy sphere over a diffuse floor under a uniform sky: directions are drawn in the fog and
+    // at the floor. Each direction's recorded density must be the mixture at the share given
+    // (up to 1, above the 0.8 that render options accept), and the guided strategy must draw
+    // that share of them: a walk that capped or rescaled a share fails one or the other.
+    let s = scene(
+        r#"
+[camera]
+origin = [0, 1.5, 4]
+target = [0, 0.5, 0]
+fov = 50
+resolution = [8, 8]
+
+[media.haze]
+type = "homogeneous"
+sigma_t = 1.5
+albedo = 0.9
+phase = { type = "hg", g = 0.6 }
+
+[[shapes]]
+type = "sphere"
+center = [0, 1, 0]
+bsdf = { type = "null" }
+interior = "haze"
+
+[[shapes]]
+type = "rectangle"
+transform = [{ rotate = { axis = [1, 0, 0], angle = -90 } }, { scale = 4 }]
+bsdf = { type = "diffuse", reflectance = 0.5 }
+
+[[lights]]
+type = "constant"
+radiance = 1
+"#,
+    );
+    let guide = Components { directions: true, distances: false, roulette: true };
+    for (alpha, surface_alpha) in [(0.3f32, 0.9f32), (1.0, 0.85), (0.9, 1.0)] {
+        let settings =
+            WalkSettings { max_depth: Some(12), alpha, surface_alpha, ..half_guided(guide) };
+        let mut trace = Trace::new();
+        // Per place (medium, surface): directions drawn, and how many the guided strategy drew.
+        let mut drawn = [(0u64, 0u64); 2];
+        for i in 0..20_000 {
+            trace.clear();
+            let mut ctx = WalkContext {
+                cache: &mut UniformSphere,
+                pixel: Some(0.3),
+                recorder: None,
+                trace: Some(&mut trace),
+            };
+            camera_sample(&settings, &s, &mut ctx, 5, i, &mut Counters::default());
+            for event in &trace {
+                let TraceEvent::Direction { surface, loaded, strategy, pdf, standard_pdf, .. } =
+                    *event
+                else {
+                    continue;
+                };
+                assert!(loaded, "sample {i}: the cache had no region: {event:?}");
+                let share = if surface { surface_alpha } else { alpha };
+                let mixed = share * zerovar::math::INV_FOUR_PI + (1.0 - share) * standard_pdf;
+                assert!(
+                    (pdf - mixed).abs() <= 1e-5 * mixed,
+                    "alpha {alpha}, surface alpha {surface_alpha}: sample {i}: {event:?}, \
+                     whose mixture at share {share} has density {mixed}"
+                );
+                let place = &mut drawn[usize::from(surface)];
+                place.0 += 1;
+                place.1 += u64::from(strategy == Strategy::Guided);
+            }
+        }
+        for ((n, guided), share) in drawn.into_iter().zip([alpha, surface_alpha]) {
+            assert!(n > 5000, "alpha {alpha}, surface alpha {surface_alpha}: {drawn:?}");
+            let p = f64::from(share);
+            if share == 1.0 {
+                assert_eq!(guided, n, "share 1: every direction is the guided strategy's");
+            } else {
+                let z = (guided as f64 - p * n as f64) / (n as f64 * p * (1.0 - p)).sqrt();
+                assert!(z.abs() < 4.5, "share {share}: {guided} of {n} guided (z {z:.2})");
+            }
+        }
+    }
+}
+
 #[test]
 fn analytic_cache_gives_zero_variance() {
     // In an infinite homogeneous emitting medium L = L_e everywhere; with L_i = L_s = L_e as
@@ -753,6 +872,122 @@ fn analytic_cache_gives_zero_variance() {
         }
         assert!(other.std_error() > 1e-3, "albedo {albedo}: unguided spread {:?}", other);
         other.assert_matches(3.0, 4.5, "unguided glow");
+    }
+}
+
+/// The exact cache of an infinite medium glowing with radiance `value` everywhere, as a field
+/// would hold it: cubic regions of side `CELL`, and a product distribution (incident radiance
+/// times HG) drawn and evaluated by the cache itself, which for constant radiance is HG.
+struct ExactGlow {
+    value: f32,
+    product: PhaseFunction,
+    around: Vec3A,
+}
+
+impl ExactGlow {
+    const CELL: f32 = 0.5;
+}
+
+impl RadianceCache for ExactGlow {
+    fn load(&mut self, _: Vec3A, _: f32) -> bool {
+        true
+    }
+    fn incident(&self, _: Vec3A) -> f32 {
+        self.value
+    }
+    fn mean_radiance(&self) -> f32 {
+        self.value
+    }
+    fn inscattered(&self, _: Vec3A, _: f32) -> f32 {
+        self.value
+    }
+    fn product_hg(&mut self, ray_dir: Vec3A, g: f32) -> bool {
+        (self.product, self.around) = (PhaseFunction::HenyeyGreenstein { g }, ray_dir);
+        true
+    }
+    fn product_cosine(&mut self, _: Vec3A) -> bool {
+        false
+    }
+    fn sample(&self, u: Vec2) -> Vec3A {
+        self.product.sample(self.around, u).0
+    }
+    fn pdf(&self, wi: Vec3A) -> f32 {
+        self.product.eval(self.around, wi)
+    }
+    fn region_exit(&self, x: Vec3A, w: Vec3A) -> f32 {
+        // The nearest cell face ahead, over the three axes.
+        let ahead = |p: f32, d: f32| {
+            let cell = (p / Self::CELL).floor();
+            let face = if d > 0.0 { cell + 1.0 } else { cell } * Self::CELL;
+            let t = (face - p) / d;
+            if d != 0.0 && t > 0.0 { t } else { f32::INFINITY }
+        };
+        ahead(x.x, w.x).min(ahead(x.y, w.y)).min(ahead(x.z, w.z))
+    }
+}
+
+#[test]
+fn exact_cache_at_full_guided_share_gives_zero_variance_through_products_and_regions() {
+    use zerovar::integrators::trace::{Strategy, Trace, TraceEvent};
+    // The infinite glow with forward scattering, every decision guided at share 1: directions
+    // from the cache's product distribution, distances from the zero-variance density over
+    // segments cut at the cache's cells (a mean free path across; every ray crosses one within
+    // 1.7 of them, so no segment's probability reaches the walk's bound of 0.95), roulette
+    // and splitting by windows. Every sample must return the radiance exactly, and the trace
+    // must show that every direction came from the product and flights were guided.
+    for albedo in [0.2f32, 0.5, 0.9] {
+        let s = scene(&format!(
+            r#"
+medium = "glow"
+
+[camera]
+origin = [0.1, 0.2, 0.3]
+target = [0, 0, 1]
+fov = 30
+resolution = [4, 4]
+
+[media.glow]
+type = "homogeneous"
+sigma_t = 2
+albedo = {albedo}
+emission = 3
+phase = {{ type = "hg", g = 0.6 }}
+"#
+        ));
+        let settings =
+            WalkSettings { alpha: 1.0, distance_alpha: 1.0, ..half_guided(Components::FULL) };
+        let mut cache =
+            ExactGlow { value: 3.0, product: PhaseFunction::Isotropic, around: Vec3A::Z };
+        let mut trace = Trace::new();
+        let (mut directions, mut flights) = (0u32, 0u32);
+        for i in 0..2000 {
+            trace.clear();
+            let mut ctx = WalkContext {
+                cache: &mut cache,
+                pixel: Some(3.0),
+                recorder: None,
+                trace: Some(&mut trace),
+            };
+            let l = camera_sample(&settings, &s, &mut ctx, 7, i, &mut Counters::default());
+            for c in l.to_array() {
+                assert!((c - 3.0).abs() < 1e-4, "albedo {albedo}: sample {i} returned {l}");
+            }
+            for event in &trace {
+                match *event {
+                    TraceEvent::Direction { strategy, .. } => {
+                        assert_eq!(strategy, Strategy::Guided, "albedo {albedo}: {event:?}");
+                        directions += 1;
+                    }
+                    TraceEvent::Flight { guided, .. } => {
+                        assert!(guided, "albedo {albedo}: {event:?}");
+                        flights += 1;
+                    }
+                    _ => {}
+                }
+            }
+        }
+        // Absorbed flights end the walk untraced; about albedo / (1 - albedo) scatter per sample.
+        assert!(directions > 300 && flights >= directions, "{directions} directions, {flights}");
     }
 }
 
@@ -1660,9 +1895,9 @@ fn guided_directions_without_windows_stop_compounding_their_weights() {
         max_depth: None,
         rr_depth: 1000,
         guide,
-        alpha: 1.0,
-        surface_alpha: 1.0,
-        distance_alpha: 1.0,
+        alpha: walk::MAX_ALPHA,
+        surface_alpha: walk::MAX_ALPHA,
+        distance_alpha: walk::MAX_ALPHA,
         collision_windows: false,
         point_light_collisions: true,
     };

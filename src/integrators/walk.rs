@@ -47,10 +47,13 @@ const STACK: usize = 32;
 pub const MAX_WALKS: usize = 64;
 /// Depth from which paths steered by weight windows also meet standard roulette.
 const WINDOW_RR_DEPTH: u32 = 256;
-/// Largest share of guided sampling in every mixture. Standard sampling always keeps 20%:
-/// a fitted mixture underflows to zero density far from its lobes, where light may still
-/// arrive, and a path that goes where the cache says it should not would otherwise carry a
-/// weight compounding without bound; with 20% no guided weight exceeds five standard ones.
+/// Largest share of guided sampling in every mixture that render options accept
+/// (`render::GuidingOptions` refuses more). Standard sampling keeps 20%: a fitted mixture
+/// underflows to zero density far from its lobes, where light may still arrive, and a path
+/// that goes where the cache says it should not would otherwise carry a weight compounding
+/// without bound; with 20% no guided weight exceeds five standard ones. The walk itself uses
+/// [`WalkSettings`]' shares as given, up to 1 (the guided strategy alone, for a cache known
+/// to be right everywhere).
 pub const MAX_ALPHA: f32 = 0.8;
 
 /// Without weight windows, the largest factor by which a path's guided decisions may have
@@ -58,7 +61,7 @@ pub const MAX_ALPHA: f32 = 0.8;
 /// decision's factor is at most `1 / (1 - alpha)`, but along a deep path they compound (a
 /// dense cloud walks dozens of vertices) into rare, huge weights; past this the path samples
 /// as if unguided, so its guided decisions never multiply its weight by more than
-/// `MAX_GUIDED_GAIN / (1 - alpha)`. The switch depends on the path's past alone, which keeps
+/// `MAX_GUIDED_GAIN / (1 - alpha)` (for alpha below 1). The switch depends on the path's past alone, which keeps
 /// every estimator unbiased. Weight windows split such paths instead (with them the bound
 /// only added error); without them it keeps guided directions in a dense cloud from doing far
 /// worse than unguided sampling (see docs/experiments.md).
@@ -73,14 +76,15 @@ pub struct WalkSettings {
     pub rr_depth: u32,
     /// Which decisions are guided.
     pub guide: Components,
-    /// Probability of the guided strategy in each mixture in media, in [0, 1].
+    /// Probability of the guided strategy in each mixture in media, in [0, 1], used as given
+    /// (render options keep it to [`MAX_ALPHA`], which bounds every guided weight).
     pub alpha: f32,
     /// Probability of the guided strategy in each mixture at surfaces, in [0, 1]
-    /// (`render::DEFAULT_SURFACE_ALPHA`); limited like `alpha`.
+    /// (`render::DEFAULT_SURFACE_ALPHA`); used as given, like `alpha`.
     pub surface_alpha: f32,
     /// Probability of the zero-variance collision density in guided flights, in [0, 1]
-    /// (`render::DEFAULT_DISTANCE_ALPHA`); limited like `alpha`, and zero wherever `alpha`
-    /// has stopped guiding the path.
+    /// (`render::DEFAULT_DISTANCE_ALPHA`); used as given, like `alpha`, and zero wherever
+    /// `alpha` has stopped guiding the path.
     pub distance_alpha: f32,
     /// Weight windows also after each medium collision, before its next-event estimate
     /// (where roulette is guided), besides the one after each direction.
@@ -255,7 +259,7 @@ fn walk<C: RadianceCache>(
         // split heavy paths, only until they have compounded the path's weight past
         // MAX_GUIDED_GAIN, and the rest of the path samples as if unguided.
         let guiding = window_rr || s.guided_gain < MAX_GUIDED_GAIN;
-        let alpha = if guiding { settings.alpha.min(MAX_ALPHA) } else { 0.0 };
+        let alpha = if guiding { settings.alpha } else { 0.0 };
         if let Some((t, delta_share)) = s.at_vertex.take() {
             // A copy split at a medium vertex scatters there (it is in that vertex's medium).
             let m = s.medium.expect("a vertex copy lies in a medium");
@@ -388,14 +392,13 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
             // result.
             let extra_nee =
                 (!scene.delta_lights.is_empty() && lights_ahead).then_some(&scene.point_lights[..]);
-            let distance_alpha = settings.distance_alpha.min(MAX_ALPHA);
             Some(guided_flight(
                 medium,
                 tracker,
                 &s.ray,
                 t_max,
                 s.beta,
-                distance_alpha,
+                settings.distance_alpha,
                 extra_nee,
                 self.ctx.cache,
                 self.sampler,
@@ -746,7 +749,7 @@ impl<C: RadianceCache> Walker<'_, '_, C> {
             guides && guide.at_vertices() && self.ctx.cache.load(hit.p, self.sampler.next_1d());
         self.counters.field_lookups += u64::from(loaded);
         // Surfaces have a share of their own (`render::DEFAULT_SURFACE_ALPHA`).
-        let alpha = if guiding { settings.surface_alpha.min(MAX_ALPHA) } else { 0.0 };
+        let alpha = if guiding { settings.surface_alpha } else { 0.0 };
         let product =
             guide.directions && alpha > 0.0 && loaded && self.ctx.cache.product_cosine(hit.ns);
         let mix = if guides {
