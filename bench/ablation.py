@@ -100,12 +100,16 @@ def main():
     p.add_argument("--seeds", type=int, default=3)
     p.add_argument("--held-out", default="bench/held-out.txt")
     p.add_argument("--commit", help="the commit the runs' binary was built from (default HEAD)")
+    p.add_argument("--fresh", help="comma-separated scenes run now (default: every scene in OUT); "
+                   "the others keep their earlier tables, dates and commits")
     a = p.parse_args()
     held_out = set(tables.held_out_names(pathlib.Path(a.held_out)) or [])
     date = datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%d")
     commit = a.commit or subprocess.run(["git", "rev-parse", "--short", "HEAD"],
                                         capture_output=True, text=True).stdout.strip()
     fresh = sorted(f.parent.parent.name for f in pathlib.Path(a.out).glob("*/ablation/results.json"))
+    if a.fresh:
+        fresh = [n for n in fresh if n in a.fresh.split(",")]
     kept = {k: v for k, v in earlier_tables(a.results).items() if k not in fresh}
     scenes = sorted(set(fresh) | set(kept))
     lines = [

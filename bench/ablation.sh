@@ -59,5 +59,6 @@ for name in "${names[@]}"; do
     --no-curve "${args[@]}" --out "$out/ablation" > "$out/ablation.log" 2>&1 \
     || { echo "$name: compare failed, see $out/ablation.log" >&2; exit 1; }
 done
+# Scenes run before keep their own tables (and dates); only those run now are rewritten.
 python3 bench/ablation.py bench/out --results bench/RESULTS.md --seconds "$seconds" --seeds "$seeds" \
-  ${COMMIT:+--commit "$COMMIT"}
+  --fresh "$(IFS=,; echo "${names[*]}")" ${COMMIT:+--commit "$COMMIT"}
