@@ -690,12 +690,18 @@ fn null_collision_guided_weights_stay_bounded_and_unbiased() {
 }
 
 fn infinite_glow(albedo: f32) -> Scene {
+    infinite_glow_scattering(albedo, r#"{ type = "isotropic" }"#)
+}
+
+/// An infinite medium glowing with radiance 3 everywhere, scattering by `phase` (a TOML
+/// table), its camera off the origin (and off the cell faces of [`ExactGlow`]).
+fn infinite_glow_scattering(albedo: f32, phase: &str) -> Scene {
     scene(&format!(
         r#"
 medium = "glow"
 
 [camera]
-origin = [0, 0, 0]
+origin = [0.1, 0.2, 0.3]
 target = [0, 0, 1]
 fov = 30
 resolution = [4, 4]
@@ -705,6 +711,7 @@ type = "homogeneous"
 sigma_t = 2
 albedo = {albedo}
 emission = 3
+phase = {phase}
 "#
     ))
 }
@@ -936,24 +943,7 @@ fn exact_cache_at_full_guided_share_gives_zero_variance_through_products_and_reg
     // and splitting by windows. Every sample must return the radiance exactly, and the trace
     // must show that every direction came from the product and flights were guided.
     for albedo in [0.2f32, 0.5, 0.9] {
-        let s = scene(&format!(
-            r#"
-medium = "glow"
-
-[camera]
-origin = [0.1, 0.2, 0.3]
-target = [0, 0, 1]
-fov = 30
-resolution = [4, 4]
-
-[media.glow]
-type = "homogeneous"
-sigma_t = 2
-albedo = {albedo}
-emission = 3
-phase = {{ type = "hg", g = 0.6 }}
-"#
-        ));
+        let s = infinite_glow_scattering(albedo, r#"{ type = "hg", g = 0.6 }"#);
         let settings =
             WalkSettings { alpha: 1.0, distance_alpha: 1.0, ..half_guided(Components::FULL) };
         let mut cache =
