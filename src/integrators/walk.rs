@@ -57,14 +57,14 @@ const WINDOW_RR_DEPTH: u32 = 256;
 pub const MAX_ALPHA: f32 = 0.8;
 
 /// Without weight windows, the largest factor by which a path's guided decisions may have
-/// multiplied its weight, relative to standard sampling, for it to go on guided. Each
-/// decision's factor is at most `1 / (1 - alpha)`, but along a deep path they compound (a
-/// dense cloud walks dozens of vertices) into rare, huge weights; past this the path samples
-/// as if unguided, so its guided decisions never multiply its weight by more than
-/// `MAX_GUIDED_GAIN / (1 - alpha)` (for alpha below 1). The switch depends on the path's past alone, which keeps
-/// every estimator unbiased. Weight windows split such paths instead (with them the bound
-/// only added error); without them it keeps guided directions in a dense cloud from doing far
-/// worse than unguided sampling (see docs/experiments.md).
+/// multiplied its weight, relative to standard sampling, for it to go on guided. Each decision's
+/// factor is at most `1 / (1 - alpha)`, but along a deep path they compound (a dense cloud walks
+/// dozens of vertices) into rare, huge weights; past this the path samples as if unguided, so its
+/// guided decisions never multiply its weight by more than `MAX_GUIDED_GAIN / (1 - alpha)` (for
+/// alpha below 1). The switch depends on the path's past alone, which keeps every estimator
+/// unbiased. Weight windows split such paths instead (with them the bound only added error);
+/// without them it keeps guided directions in a dense cloud from doing far worse than unguided
+/// sampling (see docs/experiments.md).
 pub const MAX_GUIDED_GAIN: f32 = 8.0;
 
 /// Settings of the walk.
