@@ -938,9 +938,9 @@ fn exact_cache_at_full_guided_share_gives_zero_variance_through_products_and_reg
     use zerovar::integrators::trace::{Strategy, Trace, TraceEvent};
     // The infinite glow with forward scattering, every decision guided at share 1: directions
     // from the cache's product distribution, distances from the zero-variance density over
-    // segments cut at the cache's cells (a mean free path across; every ray crosses one within
-    // 1.7 of them, so no segment's probability reaches the walk's bound of 0.95), roulette
-    // and splitting by windows. Every sample must return the radiance exactly, and the trace
+    // segments cut at the cache's cells (a mean free path across: a ray meets a face at least
+    // every 1.7 mean free paths, so no segment's probability reaches the walk's bound of
+    // 0.95), roulette and splitting by windows. Every sample must return the radiance exactly, and the trace
     // must show that every direction came from the product and flights were guided.
     for albedo in [0.2f32, 0.5, 0.9] {
         let s = infinite_glow_scattering(albedo, r#"{ type = "hg", g = 0.6 }"#);
